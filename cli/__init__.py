@@ -1,0 +1,1 @@
+"""The ``posegraph`` command line (installed as package ``posegraph_cli``)."""

@@ -1,0 +1,1 @@
+"""Benchmark scripts (run with ``python -m posegraph.benchmarks.NAME``); not timed tests."""

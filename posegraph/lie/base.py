@@ -1,0 +1,275 @@
+"""The contract every Lie group in posegraph follows, and the routines shared by all of them.
+
+Conventions (``CONVENTIONS.md``, binding):
+
+* Elements are immutable and batched: every stored array has leading batch axes that broadcast
+  like numpy, so one call acts on many elements at once.
+* Perturbations are on the right: ``X.retract(δ) = X · Exp(δ)`` and ``X.local(Y) = Log(X⁻¹ Y)``.
+  Every Jacobian is with respect to δ in ``X · Exp(δ)`` and is expressed in the tangent of the
+  output at its value, ``∂ Log(f(X)⁻¹ f(X · Exp(δ))) / ∂δ``.
+* ``jr`` is the right Jacobian: ``Exp(ξ + dξ) ≈ Exp(ξ) · Exp(jr(ξ) dξ)``; ``jl(ξ) = jr(−ξ)``.
+
+A group subclass supplies its storage, ``exp``, ``log``, ``compose``, ``inverse``, ``as_matrix``,
+``from_matrix``, ``identity``, ``sample`` and the basis of its Lie algebra (``generators``). The
+base class derives the rest from the matrix representation, which any subclass may override
+with a closed form for speed (each override is tested against the generic routine).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from abc import ABC, abstractmethod
+from typing import ClassVar, TypeVar
+
+import numpy as np
+import scipy.linalg
+
+G = TypeVar("G", bound="LieGroup")
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class LieGroup(ABC):
+    """Base of all groups. Subclasses are frozen dataclasses whose fields are numpy arrays."""
+
+    dof: ClassVar[int]
+    """Dimension of the tangent space."""
+    matrix_size: ClassVar[int]
+    """Side of the square matrix representation."""
+    point_dim: ClassVar[int]
+    """Dimension of the points the group acts on."""
+    _event_ndims: ClassVar[dict[str, int]]
+    """Number of trailing (non-batch) axes of each stored field."""
+
+    def __post_init__(self) -> None:
+        for field in dataclasses.fields(self):
+            object.__setattr__(self, field.name, np.asarray(getattr(self, field.name), float))
+
+    # ----------------------------------------------------------------------------- storage
+    @property
+    def batch_shape(self) -> tuple[int, ...]:
+        """The broadcast shape of the leading batch axes."""
+        shapes = []
+        for name, ndim in self._event_ndims.items():
+            shape = getattr(self, name).shape
+            shapes.append(shape[: len(shape) - ndim])
+        return np.broadcast_shapes(*shapes)
+
+    def __len__(self) -> int:
+        return self.batch_shape[0]
+
+    def __getitem__(self: G, index) -> G:
+        """Index the batch axes, like indexing an array of elements."""
+        batch = self.batch_shape
+        fields = {}
+        for name, ndim in self._event_ndims.items():
+            value = getattr(self, name)
+            event = value.shape[value.ndim - ndim :]
+            fields[name] = np.broadcast_to(value, batch + event)[index]
+        return type(self)(**fields)
+
+    def broadcast_to(self: G, batch_shape: tuple[int, ...]) -> G:
+        """The same elements, repeated to ``batch_shape``."""
+        fields = {}
+        for name, ndim in self._event_ndims.items():
+            value = getattr(self, name)
+            fields[name] = np.broadcast_to(value, batch_shape + value.shape[value.ndim - ndim :])
+        return type(self)(**fields)
+
+    @classmethod
+    def stack(cls: type[G], elements: list[G], axis: int = 0) -> G:
+        """Stack elements of equal batch shape along a new batch axis."""
+        return cls(
+            **{n: np.stack([getattr(e, n) for e in elements], axis) for n in cls._event_ndims}
+        )
+
+    @classmethod
+    def concatenate(cls: type[G], elements: list[G]) -> G:
+        """Join elements with one batch axis end to end."""
+        batches = [e.broadcast_to(e.batch_shape) for e in elements]
+        return cls(
+            **{n: np.concatenate([getattr(e, n) for e in batches]) for n in cls._event_ndims}
+        )
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(batch_shape={self.batch_shape})"
+
+    # ------------------------------------------------------------------ group-specific API
+    @classmethod
+    @abstractmethod
+    def identity(cls: type[G], batch_shape: tuple[int, ...] = ()) -> G:
+        """The identity element, repeated to ``batch_shape``."""
+
+    @classmethod
+    @abstractmethod
+    def exp(cls: type[G], tangent: np.ndarray) -> G:
+        """The exponential map of a (…, dof) tangent array."""
+
+    @abstractmethod
+    def log(self) -> np.ndarray:
+        """The logarithm, a (…, dof) tangent array; ``exp(log(X)) = X``."""
+
+    @abstractmethod
+    def compose(self: G, other: G) -> G:
+        """The product ``self · other``."""
+
+    @abstractmethod
+    def inverse(self: G) -> G:
+        """The inverse element."""
+
+    @abstractmethod
+    def as_matrix(self) -> np.ndarray:
+        """The (…, n, n) matrix representation."""
+
+    @classmethod
+    @abstractmethod
+    def from_matrix(cls: type[G], matrix: np.ndarray) -> G:
+        """The element of a (…, n, n) matrix representation."""
+
+    @classmethod
+    @abstractmethod
+    def sample(cls: type[G], rng: np.random.Generator, batch_shape: tuple[int, ...] = ()) -> G:
+        """Random elements (uniform rotations where the group has them)."""
+
+    @classmethod
+    @abstractmethod
+    def generators(cls) -> np.ndarray:
+        """The (dof, n, n) basis of the Lie algebra, in tangent order."""
+
+    def normalize(self: G) -> G:
+        """Project stored values back onto the group (rounding drift). Default: unchanged."""
+        return self
+
+    # ------------------------------------------------------------------ algebra (generic)
+    @classmethod
+    @functools.cache
+    def _dual_basis(cls) -> np.ndarray:
+        """(n·n, dof) matrix mapping a flattened algebra element to its coordinates."""
+        flat = cls.generators().reshape(cls.dof, -1)
+        return np.linalg.pinv(flat)
+
+    @classmethod
+    def hat(cls, tangent: np.ndarray) -> np.ndarray:
+        """The algebra matrix Σ ξ_k G_k of a (…, dof) tangent array."""
+        return np.einsum("...k,kij->...ij", np.asarray(tangent, float), cls.generators())
+
+    @classmethod
+    def vee(cls, algebra: np.ndarray) -> np.ndarray:
+        """Coordinates of a (…, n, n) algebra matrix; the inverse of :meth:`hat`."""
+        algebra = np.asarray(algebra, float)
+        flat = algebra.reshape(algebra.shape[:-2] + (-1,))
+        return flat @ cls._dual_basis()
+
+    @classmethod
+    def ad(cls, tangent: np.ndarray) -> np.ndarray:
+        """The small adjoint: ``ad_ξ η = vee([hat ξ, hat η])``, a (…, dof, dof) array."""
+        a = cls.hat(tangent)[..., None, :, :]
+        generators = cls.generators()
+        return np.swapaxes(cls.vee(a @ generators - generators @ a), -1, -2)
+
+    def adjoint(self) -> np.ndarray:
+        """Ad_X with ``X · Exp(δ) · X⁻¹ = Exp(Ad_X δ)``, a (…, dof, dof) array."""
+        m = self.as_matrix()[..., None, :, :]
+        m_inv = self.inverse().as_matrix()[..., None, :, :]
+        return np.swapaxes(self.vee(m @ self.generators() @ m_inv), -1, -2)
+
+    @classmethod
+    def jr(cls, tangent: np.ndarray) -> np.ndarray:
+        """Right Jacobian ``jr(ξ) = ∫₀¹ exp(−s ad_ξ) ds`` (Chirikjian, vol. 2, §10.2).
+
+        Evaluated exactly as the upper-right block of ``expm([[−ad_ξ, I], [0, 0]])``
+        (Van Loan 1978, "Computing integrals involving the matrix exponential").
+        """
+        ad = cls.ad(tangent)
+        n = cls.dof
+        block = np.zeros(ad.shape[:-2] + (2 * n, 2 * n))
+        block[..., :n, :n] = -ad
+        block[..., :n, n:] = np.eye(n)
+        return scipy.linalg.expm(block)[..., :n, n:]
+
+    @classmethod
+    def jr_inv(cls, tangent: np.ndarray) -> np.ndarray:
+        """Inverse of the right Jacobian."""
+        return np.linalg.inv(cls.jr(tangent))
+
+    @classmethod
+    def jl(cls, tangent: np.ndarray) -> np.ndarray:
+        """Left Jacobian: ``Exp(ξ + dξ) ≈ Exp(jl(ξ) dξ) · Exp(ξ)``; equals ``jr(−ξ)``."""
+        return cls.jr(-np.asarray(tangent, float))
+
+    @classmethod
+    def jl_inv(cls, tangent: np.ndarray) -> np.ndarray:
+        """Inverse of the left Jacobian; equals ``jr_inv(−ξ)``."""
+        return cls.jr_inv(-np.asarray(tangent, float))
+
+    # ------------------------------------------------------------------- derived operations
+    def act(self, points: np.ndarray) -> np.ndarray:
+        """Apply the elements to (…, point_dim) points."""
+        m = self.as_matrix()
+        points = np.asarray(points, float)
+        linear = m[..., : self.point_dim, : self.point_dim]
+        moved = np.einsum("...ij,...j->...i", linear, points)
+        if self.matrix_size > self.point_dim:
+            moved = moved + m[..., : self.point_dim, self.point_dim]
+        return moved
+
+    def __matmul__(self, other):
+        """``X @ Y`` composes; ``X @ points`` acts on a (…, point_dim) array."""
+        if isinstance(other, LieGroup):
+            return self.compose(other)
+        return self.act(other)
+
+    def between(self: G, other: G) -> G:
+        """``self⁻¹ · other``: ``other`` expressed in the frame of ``self``."""
+        return self.inverse().compose(other)
+
+    def retract(self: G, delta: np.ndarray) -> G:
+        """``self · Exp(δ)`` (right perturbation)."""
+        return self.compose(self.exp(delta))
+
+    def local(self: G, other: G) -> np.ndarray:
+        """``Log(self⁻¹ · other)``, so that ``self.retract(self.local(other)) = other``."""
+        return self.between(other).log()
+
+    def interpolate(self: G, other: G, alpha) -> G:
+        """The geodesic ``self · Exp(α · Log(self⁻¹ · other))`` (Eade §7); α = 0 → self."""
+        alpha = np.asarray(alpha, float)[..., None]
+        return self.retract(alpha * self.local(other))
+
+    # ------------------------------------------------------------- operations with Jacobians
+    def compose_with_jacobians(self: G, other: G) -> tuple[G, np.ndarray, np.ndarray]:
+        """``(X · Y, ∂/∂δ_X, ∂/∂δ_Y) = (X · Y, Ad(Y⁻¹), I)`` (Solà et al. 2018, eqs. 170–171)."""
+        value = self.compose(other)
+        eye = np.broadcast_to(np.eye(self.dof), value.batch_shape + (self.dof, self.dof))
+        return value, other.inverse().adjoint(), eye
+
+    def inverse_with_jacobians(self: G) -> tuple[G, np.ndarray]:
+        """``(X⁻¹, −Ad_X)`` (Solà et al. 2018, eq. 160)."""
+        return self.inverse(), -self.adjoint()
+
+    def between_with_jacobians(self: G, other: G) -> tuple[G, np.ndarray, np.ndarray]:
+        """``(Z = X⁻¹ Y, −Ad(Z⁻¹), I)``: Jacobians with respect to δ_X and δ_Y."""
+        value = self.between(other)
+        eye = np.broadcast_to(np.eye(self.dof), value.batch_shape + (self.dof, self.dof))
+        return value, -value.inverse().adjoint(), eye
+
+    def log_with_jacobians(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(ξ = Log X, ∂ξ/∂δ = jr⁻¹(ξ))``; the Jacobian is an ordinary (Euclidean) one."""
+        tangent = self.log()
+        return tangent, self.jr_inv(tangent)
+
+    def act_with_jacobians(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(X p, ∂/∂δ_X, ∂/∂p)``; ``∂(X Exp(δ) p)/∂δ_k = X G_k p̃``, with p̃ homogeneous."""
+        points = np.asarray(points, float)
+        value = self.act(points)
+        m = self.as_matrix()
+        n = self.point_dim
+        if self.matrix_size > n:
+            ones = np.ones(points.shape[:-1] + (self.matrix_size - n,))
+            lifted = np.concatenate([points, ones], axis=-1)
+        else:
+            lifted = points
+        generated = np.einsum("kij,...j->...ik", self.generators(), lifted)
+        jac_element = (m @ generated)[..., :n, :]
+        jac_points = np.broadcast_to(m[..., :n, :n], value.shape[:-1] + (n, n))
+        return value, jac_element, jac_points

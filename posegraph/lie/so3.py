@@ -1,0 +1,228 @@
+"""SO(3): rotations of space, stored as (…, 3, 3) matrices. Tangent (φ), the rotation vector.
+
+Exp: Rodrigues (Eade §2.2). Log: through the unit quaternion (Shepperd's method), which stays
+accurate near θ = π where the trace formula does not. Jacobians: Barfoot §7.1.3 / Eade §9.
+Quaternions are ordered (qx, qy, qz, qw), as in g2o files.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import ClassVar
+
+import numpy as np
+
+from . import _coeffs
+from ._coeffs import hat3, so3_polynomial, vee3
+from .base import LieGroup
+
+# Below this cos θ (θ above ≈ 2.69) the rotation axis is read from the quaternion instead of
+# the skew part of R, whose norm sin θ vanishes at π.
+_NEAR_HALF_TURN_COS = -0.9
+
+
+def angle(phi: np.ndarray) -> np.ndarray:
+    """θ = |φ| of (…, 3) rotation vectors."""
+    phi = np.asarray(phi, float)
+    return np.sqrt(np.einsum("...i,...i->...", phi, phi))
+
+
+def exp_matrix(phi: np.ndarray) -> np.ndarray:
+    """Rodrigues: R = I + (sin θ/θ) φ× + ((1 − cos θ)/θ²) φ×²."""
+    theta = angle(phi)
+    return so3_polynomial(phi, 1.0, _coeffs.sin_over(theta), _coeffs.one_minus_cos_over_sq(theta))
+
+
+def matrix_to_quaternion(rotation: np.ndarray) -> np.ndarray:
+    """(…, 4) unit quaternions (x, y, z, w) with w ≥ 0, by Shepperd's largest-pivot method."""
+    r = np.asarray(rotation, float)
+    trace = r[..., 0, 0] + r[..., 1, 1] + r[..., 2, 2]
+    # Four candidate (unnormalised) quaternions; each is accurate when its pivot is large.
+    candidates = np.stack(
+        [
+            np.stack(
+                [
+                    1 + 2 * r[..., 0, 0] - trace,
+                    r[..., 0, 1] + r[..., 1, 0],
+                    r[..., 0, 2] + r[..., 2, 0],
+                    r[..., 2, 1] - r[..., 1, 2],
+                ],
+                -1,
+            ),
+            np.stack(
+                [
+                    r[..., 0, 1] + r[..., 1, 0],
+                    1 + 2 * r[..., 1, 1] - trace,
+                    r[..., 1, 2] + r[..., 2, 1],
+                    r[..., 0, 2] - r[..., 2, 0],
+                ],
+                -1,
+            ),
+            np.stack(
+                [
+                    r[..., 0, 2] + r[..., 2, 0],
+                    r[..., 1, 2] + r[..., 2, 1],
+                    1 + 2 * r[..., 2, 2] - trace,
+                    r[..., 1, 0] - r[..., 0, 1],
+                ],
+                -1,
+            ),
+            np.stack(
+                [
+                    r[..., 2, 1] - r[..., 1, 2],
+                    r[..., 0, 2] - r[..., 2, 0],
+                    r[..., 1, 0] - r[..., 0, 1],
+                    1 + trace,
+                ],
+                -1,
+            ),
+        ],
+        axis=-2,
+    )
+    pivots = np.stack([r[..., 0, 0], r[..., 1, 1], r[..., 2, 2], trace], -1)
+    best = np.argmax(pivots, axis=-1)[..., None, None]
+    q = np.take_along_axis(candidates, best, axis=-2)[..., 0, :]
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    return np.where(q[..., 3:] < 0, -q, q)
+
+
+def quaternion_to_matrix(quaternion: np.ndarray) -> np.ndarray:
+    """Rotation matrices of (…, 4) quaternions (x, y, z, w), normalised first; q ≡ −q."""
+    q = np.asarray(quaternion, float)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+            np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+            np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        axis=-2,
+    )
+
+
+def log_matrix(rotation: np.ndarray) -> np.ndarray:
+    """The rotation vector φ of (…, 3, 3) rotation matrices, |φ| ≤ π.
+
+    With v = vee(R − Rᵀ)/2 = sin θ · axis and cos θ = (tr R − 1)/2: θ = atan2(|v|, cos θ) and
+    φ = (θ / |v|) v. Near θ = π, where |v| → 0, φ comes from the quaternion (u, w) instead:
+    φ = 2 atan2(|u|, w) u / |u|.
+    """
+    rotation = np.asarray(rotation, float)
+    v = vee3(rotation)
+    cos = 0.5 * (np.trace(rotation, axis1=-2, axis2=-1) - 1.0)
+    sin = np.sqrt(np.einsum("...i,...i->...", v, v))
+    theta = np.arctan2(sin, cos)
+    tiny = sin < 1e-6
+    scale = theta / np.where(tiny, 1.0, sin)
+    scale = np.where(tiny, 1.0 + sin * sin / 6.0, scale)  # θ/sin θ, with θ ≈ sin θ here
+    phi = scale[..., None] * v
+    near_half_turn = cos < _NEAR_HALF_TURN_COS
+    if np.any(near_half_turn):
+        q = matrix_to_quaternion(rotation[near_half_turn])
+        u, w = q[..., :3], q[..., 3]
+        n = np.sqrt(np.einsum("...i,...i->...", u, u))
+        phi[near_half_turn] = (2.0 * np.arctan2(n, w) / n)[..., None] * u
+    return phi
+
+
+def jr_matrix(phi: np.ndarray) -> np.ndarray:
+    """jr(φ) = I − ((1 − cos θ)/θ²) φ× + ((θ − sin θ)/θ³) φ×² (Barfoot eq. 7.77b)."""
+    theta = angle(phi)
+    return so3_polynomial(
+        phi,
+        1.0,
+        -_coeffs.one_minus_cos_over_sq(theta),
+        _coeffs.theta_minus_sin_over_cube(theta),
+    )
+
+
+def jr_inv_matrix(phi: np.ndarray) -> np.ndarray:
+    """jr⁻¹(φ) = I + ½ φ× + ((1 − (θ/2) cot(θ/2))/θ²) φ×² (Barfoot eq. 7.77b, inverted)."""
+    return so3_polynomial(phi, 1.0, 0.5, _coeffs.so3_jr_inv_coefficient(angle(phi)))
+
+
+def project_to_rotation(matrix: np.ndarray) -> np.ndarray:
+    """The nearest rotation matrix (Frobenius norm), by SVD with the determinant fixed to +1."""
+    u, _, vt = np.linalg.svd(np.asarray(matrix, float))
+    d = np.sign(np.linalg.det(u @ vt))
+    u = u.copy()
+    u[..., :, 2] *= d[..., None]
+    return u @ vt
+
+
+def sample_rotation(rng: np.random.Generator, batch_shape: tuple[int, ...]) -> np.ndarray:
+    """Uniformly distributed rotation matrices (normalised Gaussian quaternions)."""
+    return quaternion_to_matrix(rng.normal(size=batch_shape + (4,)))
+
+
+@dataclasses.dataclass(frozen=True, eq=False, repr=False)
+class SO3(LieGroup):
+    """Rotations ``p ↦ R p``; ``rotation`` is (…, 3, 3)."""
+
+    rotation: np.ndarray
+
+    dof: ClassVar[int] = 3
+    matrix_size: ClassVar[int] = 3
+    point_dim: ClassVar[int] = 3
+    _event_ndims: ClassVar[dict[str, int]] = {"rotation": 2}
+
+    @classmethod
+    def identity(cls, batch_shape: tuple[int, ...] = ()) -> SO3:
+        return cls(np.broadcast_to(np.eye(3), batch_shape + (3, 3)).copy())
+
+    @classmethod
+    def exp(cls, tangent: np.ndarray) -> SO3:
+        return cls(exp_matrix(tangent))
+
+    def log(self) -> np.ndarray:
+        return log_matrix(self.rotation)
+
+    def compose(self, other: SO3) -> SO3:
+        return SO3(self.rotation @ other.rotation)
+
+    def inverse(self) -> SO3:
+        return SO3(np.swapaxes(self.rotation, -1, -2))
+
+    def as_matrix(self) -> np.ndarray:
+        return self.rotation
+
+    @classmethod
+    def from_matrix(cls, matrix: np.ndarray) -> SO3:
+        return cls(matrix)
+
+    @classmethod
+    def from_quaternion(cls, quaternion: np.ndarray) -> SO3:
+        """From (…, 4) quaternions (x, y, z, w); normalised, and q ≡ −q."""
+        return cls(quaternion_to_matrix(quaternion))
+
+    def as_quaternion(self) -> np.ndarray:
+        """(…, 4) unit quaternions (x, y, z, w) with w ≥ 0."""
+        return matrix_to_quaternion(self.rotation)
+
+    @classmethod
+    def sample(cls, rng: np.random.Generator, batch_shape: tuple[int, ...] = ()) -> SO3:
+        return cls(sample_rotation(rng, batch_shape))
+
+    @classmethod
+    def generators(cls) -> np.ndarray:
+        return hat3(np.eye(3))
+
+    def normalize(self) -> SO3:
+        return SO3(project_to_rotation(self.rotation))
+
+    def adjoint(self) -> np.ndarray:
+        """Ad_R = R."""
+        return self.rotation
+
+    @classmethod
+    def ad(cls, tangent: np.ndarray) -> np.ndarray:
+        return hat3(tangent)
+
+    @classmethod
+    def jr(cls, tangent: np.ndarray) -> np.ndarray:
+        return jr_matrix(tangent)
+
+    @classmethod
+    def jr_inv(cls, tangent: np.ndarray) -> np.ndarray:
+        return jr_inv_matrix(tangent)

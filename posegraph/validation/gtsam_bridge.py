@@ -1,0 +1,88 @@
+"""Conversions between posegraph elements and gtsam 4.3 objects (CONVENTIONS.md, "Peer").
+
+* Rot2, Pose2: tangent (θ) and (vx, vy, θ), the same as ours.
+* Rot3: (φ). Pose3: gtsam's tangent is (ω, v); ours is (ρ, φ) = (v, ω).
+* Similarity3(R, t_g, s) is Eade's [[R, t_g], [0, 1/s]]; ours is N = [[sR, t], [0, 1]], so
+  t_g = t / s. Its tangent is (ω, u, λ); ours (ρ, φ, σ) = (u, ω, λ).
+"""
+
+from __future__ import annotations
+
+import gtsam
+import numpy as np
+
+from ..lie import SE2, SE3, SO2, SO3, LieGroup, Sim3
+
+_TANGENT_ORDER = {
+    SO2: np.arange(1),
+    SE2: np.arange(3),
+    SO3: np.arange(3),
+    SE3: np.array([3, 4, 5, 0, 1, 2]),
+    Sim3: np.array([3, 4, 5, 0, 1, 2, 6]),
+}
+"""Index k of gtsam's tangent holds our component _TANGENT_ORDER[group][k]."""
+
+GTSAM_TYPE = {
+    SO2: gtsam.Rot2,
+    SE2: gtsam.Pose2,
+    SO3: gtsam.Rot3,
+    SE3: gtsam.Pose3,
+    Sim3: gtsam.Similarity3,
+}
+
+
+def tangent_permutation(group: type[LieGroup]) -> np.ndarray:
+    """P with ``ξ_gtsam = P ξ_ours``; a covariance or information maps as P Σ Pᵀ."""
+    return np.eye(group.dof)[_TANGENT_ORDER[group]]
+
+
+def tangent_to_gtsam(group: type[LieGroup], tangent: np.ndarray) -> np.ndarray:
+    return np.asarray(tangent, float)[..., _TANGENT_ORDER[group]]
+
+
+def tangent_from_gtsam(group: type[LieGroup], tangent: np.ndarray) -> np.ndarray:
+    return np.asarray(tangent, float)[..., np.argsort(_TANGENT_ORDER[group])]
+
+
+def matrix_to_gtsam(group: type[LieGroup], matrix: np.ndarray) -> np.ndarray:
+    """A (…, dof, dof) matrix over our tangent (covariance, information, Jacobian) in gtsam's."""
+    p = tangent_permutation(group)
+    return p @ matrix @ p.T
+
+
+def matrix_from_gtsam(group: type[LieGroup], matrix: np.ndarray) -> np.ndarray:
+    p = tangent_permutation(group)
+    return p.T @ matrix @ p
+
+
+def to_gtsam(element: LieGroup):
+    """One element (batch shape ()) as the gtsam object of the same group."""
+    if isinstance(element, SO2):
+        return gtsam.Rot2(float(element.angle))
+    if isinstance(element, SE2):
+        x, y = element.translation
+        return gtsam.Pose2(float(x), float(y), float(element.angle))
+    if isinstance(element, SO3):
+        return gtsam.Rot3(element.rotation)
+    if isinstance(element, SE3):
+        return gtsam.Pose3(gtsam.Rot3(element.rotation), element.translation)
+    if isinstance(element, Sim3):
+        s = float(element.scale)
+        return gtsam.Similarity3(gtsam.Rot3(element.rotation), element.translation / s, s)
+    raise TypeError(f"no gtsam counterpart for {type(element).__name__}")
+
+
+def from_gtsam(value) -> LieGroup:
+    """The posegraph element of a gtsam Rot2, Pose2, Rot3, Pose3 or Similarity3."""
+    if isinstance(value, gtsam.Rot2):
+        return SO2(value.theta())
+    if isinstance(value, gtsam.Pose2):
+        return SE2(value.theta(), np.array([value.x(), value.y()]))
+    if isinstance(value, gtsam.Rot3):
+        return SO3(value.matrix())
+    if isinstance(value, gtsam.Pose3):
+        return SE3(value.rotation().matrix(), value.translation())
+    if isinstance(value, gtsam.Similarity3):
+        s = value.scale()
+        return Sim3(value.rotation().matrix(), value.translation() * s, s)
+    raise TypeError(f"no posegraph counterpart for {type(value).__name__}")

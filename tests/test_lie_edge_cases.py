@@ -1,0 +1,143 @@
+"""Hand-picked numerically hard cases per group, in the style of Sophus's tests."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from posegraph.lie import SE2, SE3, SO2, SO3, LieGroup, Sim3
+
+from .helpers import assert_same_element, numerical_jacobian
+
+ANGLES = [0.0, 1e-8, 1e-4, np.pi - 1e-6, np.pi]
+LOG_SCALES = [0.0, 1e-8, -1e-8, 3.0, -3.0]
+AXIS = np.array([0.48, -0.6, 0.64])  # unit length
+
+
+def _tangent(group: type[LieGroup], angle: float, log_scale: float = 0.0) -> np.ndarray:
+    if group is SO2:
+        return np.array([angle])
+    if group is SE2:
+        return np.array([0.7, -0.3, angle])
+    if group is SO3:
+        return angle * AXIS
+    if group is SE3:
+        return np.concatenate([[0.7, -0.3, 0.2], angle * AXIS])
+    return np.concatenate([[0.7, -0.3, 0.2], angle * AXIS, [log_scale]])
+
+
+CASES = [(g, a, 0.0) for g in (SO2, SE2, SO3, SE3) for a in ANGLES] + [
+    (Sim3, a, s) for a in ANGLES for s in LOG_SCALES
+]
+IDS = [f"{g.__name__}-theta={a:g}-sigma={s:g}" for g, a, s in CASES]
+
+
+@pytest.mark.parametrize("group, angle, log_scale", CASES, ids=IDS)
+def test_exp_log_at_hard_angles(group, angle, log_scale):
+    tangent = _tangent(group, angle, log_scale)
+    x = group.exp(tangent)
+    recovered = x.log()
+    assert_same_element(group.exp(recovered), x, atol=1e-12)
+    if angle < np.pi:
+        np.testing.assert_allclose(recovered, tangent, rtol=1e-9, atol=1e-12)
+    else:  # At θ = π, +φ and −φ are the same rotation; the rest of ξ is recovered either way.
+        rotation_part = {SO2: [0], SE2: [2], SO3: [0, 1, 2], SE3: [3, 4, 5], Sim3: [3, 4, 5]}[group]
+        assert np.isclose(np.linalg.norm(recovered[rotation_part]), np.pi, atol=1e-12)
+
+
+@pytest.mark.parametrize("group, angle, log_scale", CASES, ids=IDS)
+def test_jacobians_at_hard_angles(group, angle, log_scale):
+    tangent = _tangent(group, angle, log_scale)
+    exact = LieGroup.jr.__func__(group, tangent)  # the exact integral, no small-angle branch
+    np.testing.assert_allclose(group.jr(tangent), exact, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(
+        group.jr_inv(tangent) @ group.jr(tangent), np.eye(group.dof), atol=1e-9
+    )
+    numeric = numerical_jacobian(
+        group.exp, tangent, group.dof, input_on_group=False, output_on_group=True
+    )
+    np.testing.assert_allclose(group.jr(tangent), numeric, atol=1e-6)
+
+
+@pytest.mark.parametrize("angle", [1e-8, 1e-4, 0.3, np.pi - 1e-6])
+def test_rotation_log_is_accurate(angle):
+    """Log recovers θ to full relative precision across the range, including near π."""
+    phi = SO3.exp(angle * AXIS).log()
+    np.testing.assert_allclose(np.linalg.norm(phi), angle, rtol=1e-12)
+    np.testing.assert_allclose(phi / np.linalg.norm(phi), AXIS, atol=1e-9)
+
+
+def test_log_of_half_turn_conjugated():
+    """A half-turn about an arbitrary axis (Sophus: π 'conjugated'): X·Exp(π e_z)·X⁻¹."""
+    rng = np.random.default_rng(3)
+    x = SO3.sample(rng, (50,))
+    half_turn = SO3.exp(np.array([0.0, 0.0, np.pi]))
+    conjugated = x @ half_turn @ x.inverse()
+    phi = conjugated.log()
+    np.testing.assert_allclose(np.linalg.norm(phi, axis=-1), np.pi, atol=1e-12)
+    assert_same_element(SO3.exp(phi), conjugated, atol=1e-12)
+
+
+def test_quaternions_with_negative_w():
+    rng = np.random.default_rng(4)
+    q = rng.normal(size=(100, 4))
+    q[:, 3] = -np.abs(q[:, 3])
+    r = SO3.from_quaternion(q)
+    assert_same_element(r, SO3.from_quaternion(-q), atol=1e-14)
+    back = r.as_quaternion()
+    assert np.all(back[:, 3] >= 0)
+    unit = q / np.linalg.norm(q, axis=1, keepdims=True)
+    np.testing.assert_allclose(back, -unit, atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "q", [[1, 0, 0, 0], [0, 0, 1, 0], [0.6, 0.8, 0, 0], [0, 0, 0, -1], [0, 0.6, 0, -1e-9]]
+)
+def test_quaternion_round_trip_near_w_zero_and_minus_one(q):
+    q = np.asarray(q, float)
+    r = SO3.from_quaternion(q)
+    back = r.as_quaternion()
+    unit = q / np.linalg.norm(q)
+    assert np.allclose(back, unit, atol=1e-12) or np.allclose(back, -unit, atol=1e-12)
+    assert_same_element(SO3.from_quaternion(back), r, atol=1e-14)
+
+
+def test_pose_quaternion_conversions():
+    rng = np.random.default_rng(5)
+    x = SE3.sample(rng, (10,))
+    q, t = x.as_quaternion_translation()
+    assert_same_element(SE3.from_quaternion_translation(q, t), x, atol=1e-13)
+    s = Sim3.sample(rng, (10,))
+    assert_same_element(
+        Sim3.from_quaternion_translation_scale(s.as_quaternion(), s.translation, s.scale), s, 1e-13
+    )
+
+
+def test_angles_wrap():
+    assert np.isclose(SO2(3.0).compose(SO2(1.0)).angle, 4.0 - 2 * np.pi)
+    assert SO2.exp(np.array([np.pi])).angle == np.pi
+    assert SO2.exp(np.array([-np.pi])).angle == np.pi
+    np.testing.assert_allclose(
+        SE2.from_xytheta([1.0, 2.0, 7.0]).as_xytheta(), [1, 2, 7 - 2 * np.pi]
+    )
+
+
+def test_normalize_projects_drifted_rotations():
+    rng = np.random.default_rng(6)
+    x = SE3.sample(rng, (20,))
+    drifted = SE3(x.rotation + 1e-6 * rng.normal(size=x.rotation.shape), x.translation)
+    fixed = drifted.normalize()
+    np.testing.assert_allclose(
+        fixed.rotation @ np.swapaxes(fixed.rotation, -1, -2),
+        np.broadcast_to(np.eye(3), (20, 3, 3)),
+        atol=1e-14,
+    )
+    np.testing.assert_allclose(np.linalg.det(fixed.rotation), 1.0, atol=1e-14)
+    assert_same_element(fixed, x, atol=1e-5)
+
+
+def test_sim3_from_general_homogeneous_matrix():
+    """A 4×4 with last row (0, 0, 0, w) (Eade's form, w = 1/s) is normalised on read."""
+    s = Sim3.sample(np.random.default_rng(7))
+    eade = s.as_matrix() / s.scale
+    assert_same_element(Sim3.from_matrix(eade), s, atol=1e-13)
