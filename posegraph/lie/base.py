@@ -76,6 +76,17 @@ class LieGroup(ABC):
             fields[name] = np.broadcast_to(value, batch_shape + value.shape[value.ndim - ndim :])
         return type(self)(**fields)
 
+    def set_at(self: G, index, values: G) -> G:
+        """A copy with the elements at ``index`` (of the batch axes) replaced by ``values``."""
+        batch = self.batch_shape
+        fields = {}
+        for name, ndim in self._event_ndims.items():
+            current = getattr(self, name)
+            out = np.broadcast_to(current, batch + current.shape[current.ndim - ndim :]).copy()
+            out[index] = np.broadcast_to(getattr(values, name), out[index].shape)
+            fields[name] = out
+        return type(self)(**fields)
+
     @classmethod
     def stack(cls: type[G], elements: list[G], axis: int = 0) -> G:
         """Stack elements of equal batch shape along a new batch axis."""

@@ -134,3 +134,20 @@ class SE2(LieGroup):
         jr[..., 1, 2] = d * x + c * y
         jr[..., 2, 2] = 1.0
         return jr
+
+    @classmethod
+    def jr_inv(cls, tangent: np.ndarray) -> np.ndarray:
+        """Inverse of jr = [[A, w], [0, 1]]: A = a I − b J, so A⁻¹ = (a I + b J)/(a² + b²)."""
+        jr = cls.jr(tangent)
+        a, b = jr[..., 0, 0], jr[..., 0, 1]
+        norm = a * a + b * b
+        a, b = a / norm, b / norm
+        w = jr[..., :2, 2]
+        out = np.zeros_like(jr)
+        out[..., 0, 0] = out[..., 1, 1] = a
+        out[..., 0, 1] = -b
+        out[..., 1, 0] = b
+        out[..., 0, 2] = -(a * w[..., 0] - b * w[..., 1])
+        out[..., 1, 2] = -(b * w[..., 0] + a * w[..., 1])
+        out[..., 2, 2] = 1.0
+        return out

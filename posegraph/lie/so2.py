@@ -13,8 +13,13 @@ from .base import LieGroup
 
 def rotation_matrix_2d(angle: np.ndarray) -> np.ndarray:
     """The (…, 2, 2) rotation matrix of an angle array."""
+    angle = np.asarray(angle, float)
     c, s = np.cos(angle), np.sin(angle)
-    return np.stack([np.stack([c, -s], axis=-1), np.stack([s, c], axis=-1)], axis=-2)
+    out = np.empty(angle.shape + (2, 2))
+    out[..., 0, 0] = out[..., 1, 1] = c
+    out[..., 0, 1] = -s
+    out[..., 1, 0] = s
+    return out
 
 
 @dataclasses.dataclass(frozen=True, eq=False, repr=False)

@@ -86,3 +86,86 @@ def from_gtsam(value) -> LieGroup:
         s = value.scale()
         return Sim3(value.rotation().matrix(), value.translation() * s, s)
     raise TypeError(f"no posegraph counterpart for {type(value).__name__}")
+
+
+# ------------------------------------------------------------------------ factor graphs
+_BETWEEN_FACTOR = {
+    SE2: gtsam.BetweenFactorPose2,
+    SE3: gtsam.BetweenFactorPose3,
+    Sim3: gtsam.BetweenFactorSimilarity3,
+}
+_PRIOR_FACTOR = {
+    SE2: gtsam.PriorFactorPose2,
+    SE3: gtsam.PriorFactorPose3,
+    Sim3: gtsam.PriorFactorSimilarity3,
+}
+_VALUE_GETTER = {SE2: "atPose2", SE3: "atPose3", Sim3: "atSimilarity3"}
+
+GAUGE_SIGMA = 1e-6
+"""Standard deviation of the tight prior that stands in for a held node (datasets README)."""
+
+
+def _noise_model(group: type[LieGroup], information: np.ndarray):
+    return gtsam.noiseModel.Gaussian.Information(matrix_to_gtsam(group, information))
+
+
+def graph_to_gtsam(graph, values=None, hold_gauge: bool = True):
+    """(NonlinearFactorGraph, Values) for a PoseGraph; keys are the node ids.
+
+    Held nodes (``graph.gauge_nodes()``) get a prior of σ = ``GAUGE_SIGMA`` at their value,
+    which is how gtsam expresses a fixed node; it adds ≈ 0 to the error at that value.
+    """
+    group = graph.group
+    values = graph.values if values is None else values
+    factors = gtsam.NonlinearFactorGraph()
+    initial = gtsam.Values()
+    ids = graph.node_ids.tolist()
+    for k, node in enumerate(ids):
+        initial.insert(node, to_gtsam(values[k]))
+    edges = graph.edges
+    between = _BETWEEN_FACTOR[group]
+    for e in range(len(edges)):
+        factors.add(
+            between(
+                ids[edges.i[e]],
+                ids[edges.j[e]],
+                to_gtsam(edges.measurements[e]),
+                _noise_model(group, edges.information[e]),
+            )
+        )
+    prior = _PRIOR_FACTOR[group]
+    for e in range(len(graph.priors)):
+        factors.add(
+            prior(
+                ids[graph.priors.i[e]],
+                to_gtsam(graph.priors.measurements[e]),
+                _noise_model(group, graph.priors.information[e]),
+            )
+        )
+    if hold_gauge:
+        sigma = gtsam.noiseModel.Isotropic.Sigma(group.dof, GAUGE_SIGMA)
+        for k in graph.gauge_nodes().tolist():
+            factors.add(prior(ids[k], to_gtsam(values[k]), sigma))
+    return factors, initial
+
+
+def values_from_gtsam(graph, gtsam_values) -> LieGroup:
+    """The node values of a gtsam Values, in the graph's node order."""
+    getter = _VALUE_GETTER[graph.group]
+    return graph.group.stack(
+        [from_gtsam(getattr(gtsam_values, getter)(node)) for node in graph.node_ids.tolist()]
+    )
+
+
+def gradient_from_gtsam(graph, factors, gtsam_values) -> np.ndarray:
+    """(num_nodes, dof) gradient Jᵀ Ω r of gtsam's linearisation, in our tangent order.
+
+    gtsam's Gaussian factor graph holds whitened J and b = −r; its gradient at zero,
+    ``gradientAtZero``, is −Jᵀ b = Jᵀ Ω r.
+    """
+    linear = factors.linearize(gtsam_values)
+    gradient = linear.gradientAtZero()
+    out = np.zeros((graph.num_nodes, graph.group.dof))
+    for k, node in enumerate(graph.node_ids.tolist()):
+        out[k] = tangent_from_gtsam(graph.group, gradient.at(node))
+    return out

@@ -1,0 +1,103 @@
+"""posegraph against gtsam Levenberg-Marquardt on the benchmark graphs, side by side.
+
+Usage: ``python -m posegraph.benchmarks.optimizer [--repeats 3] [--graphs sphere2500 …]``.
+Both start from the same values (the file's, or odometry where it has no vertices) on the same
+graph; gtsam holds the gauge node with a σ = 1e-6 prior. Prints a markdown table: time (best of
+``repeats``), iterations, final error ½ Σ rᵀΩr, the time ratio posegraph/gtsam, and posegraph's
+time per phase.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+from ..datasets_paths import BENCHMARK_GRAPHS, gtsam_data_dir, shared_datasets_dir
+from ..io import read_graph
+from ..solvers import optimize
+
+
+def benchmark_files() -> list[Path]:
+    """The shared benchmark graphs and gtsam's w10000.graph and sphere2500.txt, where present."""
+    files = []
+    shared = shared_datasets_dir()
+    if shared is not None:
+        files += [shared / name for name in BENCHMARK_GRAPHS]
+    data = gtsam_data_dir()
+    if data is not None:
+        files += [data / "w10000.graph", data / "sphere2500.txt"]
+    return [f for f in files if f.is_file()]
+
+
+def _run_gtsam(graph, repeats: int):
+    import gtsam
+
+    from ..validation.gtsam_bridge import graph_to_gtsam
+
+    factors, initial = graph_to_gtsam(graph)
+    best, result, iterations = float("inf"), None, 0
+    for _ in range(repeats):
+        start = time.perf_counter()
+        optimizer = gtsam.LevenbergMarquardtOptimizer(
+            factors, initial, gtsam.LevenbergMarquardtParams()
+        )
+        result = optimizer.optimize()
+        best = min(best, time.perf_counter() - start)
+        iterations = optimizer.iterations()
+    return best, iterations, factors.error(result)
+
+
+def _run_posegraph(graph, repeats: int):
+    best, result = float("inf"), None
+    for _ in range(repeats):
+        start = time.perf_counter()
+        candidate = optimize(graph)
+        elapsed = time.perf_counter() - start
+        if elapsed < best:
+            best, result = elapsed, candidate
+    return best, result.summary
+
+
+def run(files: list[Path], repeats: int) -> str:
+    header = (
+        "| graph | read (s) | gtsam (s) | gtsam iters | gtsam error | posegraph (s) | iters "
+        "| posegraph error | rel. diff | time ratio "
+        "| linearize / assemble / factorize / solve (s) |"
+    )
+    lines = [header, "|" + "---|" * 11]
+    for path in files:
+        start = time.perf_counter()
+        graph = read_graph(str(path)).graph
+        read_time = time.perf_counter() - start
+        g_time, g_iters, g_error = _run_gtsam(graph, repeats)
+        p_time, summary = _run_posegraph(graph, repeats)
+        phases = summary.phase_times
+        split = " / ".join(
+            f"{phases[k]:.3f}" for k in ("linearize", "assemble", "factorize", "solve")
+        )
+        difference = (summary.final_error - g_error) / g_error
+        lines.append(
+            f"| {path.name} | {read_time:.3f} | {g_time:.3f} | {g_iters} | {g_error:.10g} "
+            f"| {p_time:.3f} | {summary.num_iterations} | {summary.final_error:.10g} "
+            f"| {difference:+.1e} | {p_time / g_time:.2f} | {split} |"
+        )
+        print(lines[-1], flush=True)
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--graphs", nargs="*", help="names (without suffix) to run; default all")
+    args = parser.parse_args()
+    files = benchmark_files()
+    if args.graphs:
+        files = [f for f in files if f.stem in args.graphs]
+    if not files:
+        raise SystemExit("no benchmark graphs found (../shared/datasets or gtsam's Data/)")
+    print(run(files, args.repeats))
+
+
+if __name__ == "__main__":
+    main()

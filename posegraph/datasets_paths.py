@@ -1,0 +1,59 @@
+"""Where the benchmark graphs are: ``../shared/datasets`` and the gtsam wheel's ``Data/``."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+SHARED_DATASETS_ENV = "POSEGRAPH_SHARED_DATASETS"
+BENCHMARK_GRAPHS = [
+    "tinyGrid3D.g2o",
+    "smallGrid3D.g2o",
+    "intel.g2o",
+    "MIT.g2o",
+    "CSAIL.g2o",
+    "manhattan.g2o",
+    "sphere2500.g2o",
+    "parking-garage.g2o",
+    "torus3D.g2o",
+    "sphere_bignoise_vertex3.g2o",
+]
+BEST_KNOWN_ERROR = {
+    "tinyGrid3D.g2o": 9.3139094,
+    "smallGrid3D.g2o": 517.92533,
+    "intel.g2o": 22.502117,
+    "MIT.g2o": 385.11949,
+    "CSAIL.g2o": 20.275442,
+    "manhattan.g2o": 1774.5205,
+    "sphere2500.g2o": 675.70096,
+    "parking-garage.g2o": 0.6341924,
+    "torus3D.g2o": 12117.637,
+    "sphere_bignoise_vertex3.g2o": 1494168.8,
+}
+"""½ Σ rᵀΩr at the best known optimum, from ``../shared/datasets/README.md``."""
+
+
+def shared_datasets_dir() -> Path | None:
+    """``$POSEGRAPH_SHARED_DATASETS``, or ``../shared/datasets`` beside the project checkout."""
+    candidates = []
+    if os.environ.get(SHARED_DATASETS_ENV):
+        candidates.append(Path(os.environ[SHARED_DATASETS_ENV]))
+    project_root = Path(__file__).resolve().parent.parent
+    candidates += [
+        project_root.parent / "shared" / "datasets",
+        Path.cwd().parent / "shared" / "datasets",
+    ]
+    for candidate in candidates:
+        if (candidate / "sphere2500.g2o").is_file():
+            return candidate
+    return None
+
+
+def gtsam_data_dir() -> Path | None:
+    """The ``Data/`` folder of the installed gtsam wheel, if gtsam is installed."""
+    try:
+        import gtsam
+    except ImportError:
+        return None
+    folder = Path(gtsam.__file__).parent / "Data"
+    return folder if folder.is_dir() else None

@@ -1,0 +1,68 @@
+"""Batched residuals, analytic Jacobians and cost of between edges and priors.
+
+CONVENTIONS.md (binding):
+
+* between i → j with measurement Z: ``r = Log(Z⁻¹ Xᵢ⁻¹ Xⱼ)``,
+  ``∂r/∂δⱼ = jr⁻¹(r)`` and ``∂r/∂δᵢ = −jr⁻¹(r) Ad(Xⱼ⁻¹ Xᵢ)``;
+* prior on X with measurement Z: ``r = Log(Z⁻¹ X)``, ``∂r/∂δ = jr⁻¹(r)``;
+* ``error = ½ Σ rᵀ Ω r`` (gtsam's ``graph.error``) and ``chi2 = Σ rᵀ Ω r`` (what g2o prints).
+
+One implementation serves SE2, SE3 and Sim3 through the group API.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .graph import EdgeSet
+from .lie import LieGroup
+
+
+@dataclasses.dataclass(frozen=True)
+class Linearization:
+    """Residuals (m, d) and Jacobians (m, d, d) of every edge; ``jac_i`` is None for priors."""
+
+    residuals: np.ndarray
+    jac_i: np.ndarray | None
+    jac_j: np.ndarray
+
+
+def between_residuals(values: LieGroup, edges: EdgeSet) -> np.ndarray:
+    """r = Log(Z⁻¹ Xᵢ⁻¹ Xⱼ) for every between edge."""
+    relative = values[edges.i].between(values[edges.j])
+    return edges.measurements.between(relative).log()
+
+
+def prior_residuals(values: LieGroup, priors: EdgeSet) -> np.ndarray:
+    """r = Log(Z⁻¹ X) for every prior."""
+    return priors.measurements.between(values[priors.i]).log()
+
+
+def linearize_between(values: LieGroup, edges: EdgeSet) -> Linearization:
+    """Residuals and both Jacobians of every between edge."""
+    relative = values[edges.i].between(values[edges.j])
+    residuals = edges.measurements.between(relative).log()
+    jac_j = values.jr_inv(residuals)
+    jac_i = -jac_j @ relative.inverse().adjoint()
+    return Linearization(residuals, jac_i, jac_j)
+
+
+def linearize_priors(values: LieGroup, priors: EdgeSet) -> Linearization:
+    """Residuals and Jacobians of every prior."""
+    residuals = prior_residuals(values, priors)
+    return Linearization(residuals, None, values.jr_inv(residuals))
+
+
+def weighted_squares(residuals: np.ndarray, information: np.ndarray) -> np.ndarray:
+    """rᵀ Ω r of every edge."""
+    return np.einsum("mi,mij,mj->m", residuals, information, residuals)
+
+
+def chi2(values: LieGroup, edges: EdgeSet, priors: EdgeSet) -> float:
+    """Σ rᵀ Ω r over between edges and priors (g2o's χ²); ``error`` is half of it."""
+    total = weighted_squares(between_residuals(values, edges), edges.information).sum()
+    if len(priors):
+        total += weighted_squares(prior_residuals(values, priors), priors.information).sum()
+    return float(total)

@@ -1,0 +1,218 @@
+"""``PoseGraph``: nodes on one Lie group, between edges, priors, and fixed nodes.
+
+Node ids are arbitrary integers; internally every array refers to nodes by their *index*, the
+order in which they were added. Edges are stored stacked: index arrays ``i``, ``j``, stacked
+measurements and (…, d, d) information matrices over the tangent of CONVENTIONS.md.
+A between edge i → j measures Z ≈ Xᵢ⁻¹ Xⱼ; a prior on i measures Z ≈ Xᵢ.
+
+The graph grows in place (``add_nodes``, ``add_edges``, ``add_priors``, ``fix``) and keeps its
+values, so a back end can extend it and optimise again from the last solution.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Iterable
+
+import numpy as np
+
+from .lie import SE2, SE3, LieGroup, Sim3
+
+POSE_GROUPS: tuple[type[LieGroup], ...] = (SE2, SE3, Sim3)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class EdgeSet:
+    """Stacked edges of one kind. For priors, ``j`` is unused and equals ``i``."""
+
+    i: np.ndarray
+    j: np.ndarray
+    measurements: LieGroup
+    information: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.i.shape[0])
+
+    @classmethod
+    def empty(cls, group: type[LieGroup]) -> EdgeSet:
+        d = group.dof
+        empty_index = np.zeros(0, dtype=np.int64)
+        return cls(empty_index, empty_index, group.identity((0,)), np.zeros((0, d, d)))
+
+    def extended(self, other: EdgeSet) -> EdgeSet:
+        group = type(self.measurements)
+        return EdgeSet(
+            np.concatenate([self.i, other.i]),
+            np.concatenate([self.j, other.j]),
+            group.concatenate([self.measurements, other.measurements]),
+            np.concatenate([self.information, other.information]),
+        )
+
+    def subset(self, keep: np.ndarray) -> EdgeSet:
+        return EdgeSet(self.i[keep], self.j[keep], self.measurements[keep], self.information[keep])
+
+
+class PoseGraph:
+    """A pose graph over one group (SE2, SE3 or Sim3)."""
+
+    def __init__(self, group: type[LieGroup]) -> None:
+        if group not in POSE_GROUPS:
+            names = ", ".join(g.__name__ for g in POSE_GROUPS)
+            raise ValueError(f"a pose graph holds one of {names}, not {group.__name__}")
+        self.group = group
+        self.node_ids = np.zeros(0, dtype=np.int64)
+        self.values: LieGroup = group.identity((0,))
+        self.edges = EdgeSet.empty(group)
+        self.priors = EdgeSet.empty(group)
+        self.fixed = np.zeros(0, dtype=bool)
+        self.equivalences = np.zeros((0, 2), dtype=np.int64)
+        """TORO ``EQUIV`` pairs of node ids: kept for round trips, not constraints (as gtsam)."""
+        self._index_of: dict[int, int] = {}
+        self.structure_version = 0
+        """Incremented by every change that alters the sparsity pattern or the gauge."""
+
+    # ------------------------------------------------------------------------ queries
+    @property
+    def num_nodes(self) -> int:
+        return int(self.node_ids.shape[0])
+
+    @property
+    def num_edges(self) -> int:
+        return len(self.edges)
+
+    def __repr__(self) -> str:
+        return (
+            f"PoseGraph({self.group.__name__}, {self.num_nodes} nodes, {self.num_edges} edges, "
+            f"{len(self.priors)} priors, {int(self.fixed.sum())} fixed)"
+        )
+
+    def has_node(self, node_id: int) -> bool:
+        return int(node_id) in self._index_of
+
+    def index(self, node_ids: Iterable[int] | np.ndarray | int) -> np.ndarray:
+        """Indices of node ids; raises ``KeyError`` naming the first unknown id."""
+        ids = np.atleast_1d(np.asarray(node_ids, dtype=np.int64))
+        try:
+            return np.fromiter((self._index_of[k] for k in ids.tolist()), np.int64, ids.size)
+        except KeyError as error:
+            raise KeyError(f"node {error.args[0]} is not in the graph") from None
+
+    def values_of(self, node_ids) -> LieGroup:
+        """The current values of some nodes, stacked in the order given."""
+        return self.values[self.index(node_ids)]
+
+    # ------------------------------------------------------------------------ growth
+    def add_nodes(self, node_ids, values: LieGroup) -> np.ndarray:
+        """Add nodes with initial values; returns their indices. Ids must be new and unique."""
+        ids = np.atleast_1d(np.asarray(node_ids, dtype=np.int64))
+        values = values.broadcast_to(ids.shape) if values.batch_shape != ids.shape else values
+        if not isinstance(values, self.group):
+            raise TypeError(
+                f"values are {type(values).__name__}, the graph is {self.group.__name__}"
+            )
+        unique, counts = np.unique(ids, return_counts=True)
+        if np.any(counts > 1):
+            raise ValueError(f"node id {unique[counts > 1][0]} is given twice")
+        clashes = [k for k in ids.tolist() if k in self._index_of]
+        if clashes:
+            raise ValueError(f"node {clashes[0]} is already in the graph")
+        start = self.num_nodes
+        indices = np.arange(start, start + ids.size)
+        self._index_of.update(zip(ids.tolist(), indices.tolist(), strict=True))
+        self.node_ids = np.concatenate([self.node_ids, ids])
+        self.values = self.group.concatenate([self.values, values])
+        self.fixed = np.concatenate([self.fixed, np.zeros(ids.size, dtype=bool)])
+        self.structure_version += 1
+        return indices
+
+    def _edge_set(self, i_ids, j_ids, measurements: LieGroup, information) -> EdgeSet:
+        i = self.index(i_ids)
+        j = self.index(j_ids)
+        count = i.size
+        if not isinstance(measurements, self.group):
+            raise TypeError(
+                f"measurements are {type(measurements).__name__}, the graph is "
+                f"{self.group.__name__}"
+            )
+        measurements = measurements.broadcast_to((count,))
+        d = self.group.dof
+        information = np.broadcast_to(np.asarray(information, float), (count, d, d)).copy()
+        return EdgeSet(i, j, measurements, information)
+
+    def add_edges(self, i_ids, j_ids, measurements: LieGroup, information) -> np.ndarray:
+        """Add between edges i → j measuring Z ≈ Xᵢ⁻¹ Xⱼ; returns their edge indices."""
+        new = self._edge_set(i_ids, j_ids, measurements, information)
+        if np.any(new.i == new.j):
+            raise ValueError(f"self-loop on node {self.node_ids[new.i[new.i == new.j][0]]}")
+        start = self.num_edges
+        self.edges = self.edges.extended(new)
+        self.structure_version += 1
+        return np.arange(start, start + len(new))
+
+    def add_priors(self, node_ids, measurements: LieGroup, information) -> np.ndarray:
+        """Add priors Z ≈ Xᵢ; returns their prior indices."""
+        new = self._edge_set(node_ids, node_ids, measurements, information)
+        start = len(self.priors)
+        self.priors = self.priors.extended(new)
+        self.structure_version += 1
+        return np.arange(start, start + len(new))
+
+    def remove_edges(self, edge_indices) -> None:
+        """Remove between edges by index (indices of later edges shift down)."""
+        keep = np.ones(self.num_edges, dtype=bool)
+        keep[np.asarray(edge_indices, dtype=np.int64)] = False
+        self.edges = self.edges.subset(keep)
+        self.structure_version += 1
+
+    def fix(self, node_ids, fixed: bool = True) -> None:
+        """Hold nodes at their current values (or release them with ``fixed=False``)."""
+        self.fixed[self.index(node_ids)] = fixed
+        self.structure_version += 1
+
+    def set_values(self, values: LieGroup) -> None:
+        """Replace all node values (batch shape (num_nodes,))."""
+        if values.batch_shape != (self.num_nodes,):
+            raise ValueError(f"expected {self.num_nodes} values, got {values.batch_shape}")
+        self.values = values
+
+    def copy(self) -> PoseGraph:
+        """An independent copy (arrays are copied on the next change, never shared in place)."""
+        other = PoseGraph(self.group)
+        other.node_ids = self.node_ids.copy()
+        other.values = self.values
+        other.edges = self.edges
+        other.priors = self.priors
+        other.fixed = self.fixed.copy()
+        other.equivalences = self.equivalences.copy()
+        other._index_of = dict(self._index_of)
+        other.structure_version = self.structure_version
+        return other
+
+    # ------------------------------------------------------------------------ structure
+    def components(self) -> np.ndarray:
+        """Connected-component label of every node (edges of either direction connect)."""
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import connected_components
+
+        n = self.num_nodes
+        adjacency = coo_matrix((np.ones(self.num_edges), (self.edges.i, self.edges.j)), (n, n))
+        return connected_components(adjacency, directed=False)[1]
+
+    def gauge_nodes(self) -> np.ndarray:
+        """Indices of the nodes held fixed when optimising (CONVENTIONS.md, "Gauge").
+
+        Nodes marked fixed are held. A connected component with no fixed node and no prior
+        has its lowest-id node held, which fixes its gauge (and, for Sim3, its scale).
+        """
+        if self.num_nodes == 0:
+            return np.zeros(0, dtype=np.int64)
+        labels = self.components()
+        anchored = np.zeros(labels.max() + 1 if labels.size else 0, dtype=bool)
+        anchored[labels[self.fixed]] = True
+        anchored[labels[self.priors.i]] = True
+        held = self.fixed.copy()
+        order = np.lexsort((self.node_ids, labels))
+        first_of_component = order[np.r_[True, labels[order][1:] != labels[order][:-1]]]
+        lowest = first_of_component[~anchored[labels[first_of_component]]]
+        held[lowest] = True
+        return np.flatnonzero(held)

@@ -1,0 +1,99 @@
+"""Initial values for a pose graph.
+
+``spanning_tree_values`` composes edge measurements along a spanning tree: the odometry chain
+i → i+1 where it exists, other edges only to bridge its breaks. The composition runs on all nodes
+at once by pointer jumping (each round composes every node with its ancestor's offset and halves
+the remaining depth), so a chain of N poses costs O(log N) batched compositions.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse
+import scipy.sparse.csgraph
+
+from .graph import PoseGraph
+from .lie import LieGroup
+
+_ANCHOR_WEIGHT = 1e-9  # known values hang off the virtual root first
+_ODOMETRY_WEIGHT = 1.0
+_OTHER_WEIGHT = 2.0
+_COMPONENT_ROOT_WEIGHT = 4.0  # a component with no known value starts at the identity
+
+
+def odometry_mask(graph: PoseGraph) -> np.ndarray:
+    """Edges between consecutive ids (i → i+1 or i+1 → i)."""
+    ids = graph.node_ids
+    return np.abs(ids[graph.edges.j] - ids[graph.edges.i]) == 1
+
+
+def spanning_tree_values(graph: PoseGraph, known: np.ndarray | None = None) -> LieGroup:
+    """Values from composing measurements along a spanning tree preferring odometry edges.
+
+    ``known`` marks nodes whose current values are kept; each connected component without a
+    known node starts at the identity at its lowest id.
+    """
+    n = graph.num_nodes
+    group = graph.group
+    known = np.zeros(n, dtype=bool) if known is None else np.asarray(known, dtype=bool)
+    i, j = graph.edges.i, graph.edges.j
+    weights = np.where(odometry_mask(graph), _ODOMETRY_WEIGHT, _OTHER_WEIGHT)
+
+    labels = graph.components()
+    order = np.lexsort((graph.node_ids, labels))
+    first_of_component = order[np.r_[True, labels[order][1:] != labels[order][:-1]]]
+    root = n  # a virtual node joined to the known nodes and to every component's first node
+    anchors = np.concatenate([np.flatnonzero(known), first_of_component])
+    anchor_weights = np.concatenate(
+        [
+            np.full(known.sum(), _ANCHOR_WEIGHT),
+            np.full(first_of_component.size, _COMPONENT_ROOT_WEIGHT),
+        ]
+    )
+    rows = np.concatenate([np.minimum(i, j), anchors])
+    cols = np.concatenate([np.maximum(i, j), np.full(anchors.size, root)])
+    all_weights = np.concatenate([weights, anchor_weights])
+    # Keep the lightest edge of each pair before the spanning tree (duplicates would be summed).
+    keep = np.lexsort((all_weights, cols, rows))
+    pair = rows[keep] * (n + 1) + cols[keep]
+    keep = keep[np.r_[True, pair[1:] != pair[:-1]]]
+    adjacency = scipy.sparse.coo_matrix(
+        (all_weights[keep], (rows[keep], cols[keep])), shape=(n + 1, n + 1)
+    ).tocsr()
+    tree = scipy.sparse.csgraph.minimum_spanning_tree(adjacency)
+    _, parent = scipy.sparse.csgraph.breadth_first_order(tree, root, directed=False)
+    parent[root] = root
+
+    # Offsets T_v = X_parent⁻¹ X_v: a known value or the identity below the root, else the edge.
+    from_root = np.flatnonzero(parent[:n] == root)
+    known_from_root = from_root[known[from_root]]
+    tree_nodes = np.flatnonzero(parent[:n] != root)
+    offsets = (
+        group.identity((n + 1,))
+        .set_at(known_from_root, graph.values[known_from_root])
+        .set_at(tree_nodes, _edge_offsets(graph, parent[tree_nodes], tree_nodes))
+    )
+
+    while True:
+        grandparent = parent[parent]
+        if np.array_equal(grandparent, parent):
+            break
+        offsets = offsets[parent] @ offsets
+        parent = grandparent
+    return offsets[:n]
+
+
+def _edge_offsets(graph: PoseGraph, parents: np.ndarray, children: np.ndarray) -> LieGroup:
+    """X_parent⁻¹ X_child from the measurement of an edge joining them (inverted if reversed)."""
+    n = graph.num_nodes
+    i, j = graph.edges.i, graph.edges.j
+    forward_keys = i * n + j
+    backward_keys = j * n + i
+    wanted = parents * n + children
+    order_f, order_b = np.argsort(forward_keys), np.argsort(backward_keys)
+    pos_f = np.clip(np.searchsorted(forward_keys, wanted, sorter=order_f), 0, len(i) - 1)
+    pos_b = np.clip(np.searchsorted(backward_keys, wanted, sorter=order_b), 0, len(i) - 1)
+    edge_f, edge_b = order_f[pos_f], order_b[pos_b]
+    measurements = graph.edges.measurements
+    backward = np.flatnonzero(forward_keys[edge_f] != wanted)
+    return measurements[edge_f].set_at(backward, measurements[edge_b[backward]].inverse())

@@ -1,0 +1,15 @@
+"""Reading and writing pose-graph files (g2o and TORO)."""
+
+from .errors import GraphFileError
+from .reader import ReadOptions, ReadResult, read_graph
+from .writer import format_g2o, format_toro, write_graph
+
+__all__ = [
+    "GraphFileError",
+    "ReadOptions",
+    "ReadResult",
+    "format_g2o",
+    "format_toro",
+    "read_graph",
+    "write_graph",
+]

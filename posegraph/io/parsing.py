@@ -1,0 +1,177 @@
+"""Line-table parsing shared by the g2o and TORO readers.
+
+A file is split into lines of ``TAG number number …``. Lines of one tag are converted to a float
+array in one call; only when that fails is the offending line searched for. Every check is
+vectorised and reports the first bad line as ``file:line: message``. In lenient mode a bad line is
+skipped and recorded instead.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+from .errors import GraphFileError
+
+
+@dataclasses.dataclass(frozen=True)
+class Rows:
+    """The lines of one tag: their line numbers and their numbers (tag excluded)."""
+
+    tag: str
+    line_numbers: np.ndarray
+    numbers: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.line_numbers.size)
+
+    def subset(self, keep: np.ndarray) -> Rows:
+        return Rows(self.tag, self.line_numbers[keep], self.numbers[keep])
+
+    def ids(self, column: int) -> np.ndarray:
+        return self.numbers[:, column].astype(np.int64)
+
+
+class LineChecker:
+    """Raises on the first bad line (strict) or drops bad lines and records them (lenient)."""
+
+    def __init__(self, path: str, lenient: bool) -> None:
+        self.path, self.lenient = path, lenient
+        self.skipped: list[tuple[int, str]] = []
+
+    def fail(self, line: int | None, message: str) -> None:
+        if not self.lenient or line is None:
+            raise GraphFileError(self.path, line, message)
+        self.skipped.append((line, message))
+
+    def keep_good(self, rows: Rows, bad: np.ndarray, message) -> Rows:
+        """Handle the rows where ``bad`` holds; ``message(k)`` describes row k."""
+        bad_rows = np.flatnonzero(bad)
+        for k in bad_rows:
+            self.fail(int(rows.line_numbers[k]), f"{rows.tag}: {message(k)}")
+        return rows.subset(~bad) if bad_rows.size else rows
+
+    def skipped_by_tag(self) -> Counter:
+        return Counter(message.split(":", 1)[0] for _, message in self.skipped)
+
+
+def read_lines(path: str) -> list[tuple[int, list[str]]]:
+    """(line number, tokens) of every line that is not blank or a ``#`` comment."""
+    try:
+        text = Path(path).read_text()
+    except FileNotFoundError:
+        raise GraphFileError(path, None, "no such file") from None
+    except IsADirectoryError:
+        raise GraphFileError(path, None, "is a directory, not a graph file") from None
+    except UnicodeDecodeError:
+        raise GraphFileError(path, None, "is not a text file") from None
+    except OSError as error:
+        raise GraphFileError(path, None, f"cannot be read ({error.strerror})") from None
+    lines = []
+    for number, line in enumerate(text.splitlines(), start=1):
+        tokens = line.split()
+        if tokens and not tokens[0].startswith("#"):
+            lines.append((number, tokens))
+    return lines
+
+
+def to_rows(
+    tag: str,
+    entries: list[tuple[int, list[str]]],
+    widths: tuple[int, ...],
+    id_columns: tuple[int, ...],
+    checker: LineChecker,
+) -> Rows | None:
+    """Convert the lines of one tag, checking token counts, numbers, finiteness and ids.
+
+    ``widths`` are the accepted counts of numbers after the tag (several for dialects; an empty
+    tuple accepts any count ≥ 1, all ids). Returns None when no line survives.
+    """
+    good: list[tuple[int, list[str]]] = []
+    for number, tokens in entries:
+        count = len(tokens) - 1
+        if (widths and count not in widths) or (not widths and count < 1):
+            expected = " or ".join(str(w) for w in widths) if widths else "at least 1"
+            checker.fail(number, f"{tag}: expected {expected} numbers after the tag, found {count}")
+        else:
+            good.append((number, tokens))
+    rows_by_width: dict[int, list[tuple[int, list[str]]]] = {}
+    for entry in good:
+        rows_by_width.setdefault(len(entry[1]) - 1, []).append(entry)
+    if len(rows_by_width) > 1 and widths:
+        found = sorted(rows_by_width)
+        first = min(rows_by_width[found[-1]])[0]
+        checker.fail(first, f"{tag}: lines of {found} numbers mixed in one file (two dialects)")
+        good = rows_by_width[found[0]]
+    if not good:
+        return None
+    if not widths:  # variable-length id lists (FIX)
+        flat = [(number, token) for number, tokens in good for token in tokens[1:]]
+        entries_1d = [(number, [tag, token]) for number, token in flat]
+        return to_rows(tag, entries_1d, (1,), (0,), checker)
+    line_numbers = np.array([number for number, _ in good])
+    try:
+        numbers = np.array([tokens[1:] for _, tokens in good], dtype=float)
+    except ValueError:
+        numbers = np.full((len(good), len(good[0][1]) - 1), np.nan)
+        keep = np.ones(len(good), dtype=bool)
+        for k, (number, tokens) in enumerate(good):
+            try:
+                numbers[k] = np.array(tokens[1:], dtype=float)
+            except ValueError:
+                bad = next(t for t in tokens[1:] if not _is_number(t))
+                checker.fail(number, f"{tag}: {bad!r} is not a number")
+                keep[k] = False
+        line_numbers, numbers = line_numbers[keep], numbers[keep]
+    rows = Rows(tag, line_numbers, numbers)
+    non_finite = ~np.isfinite(rows.numbers).all(axis=1)
+    rows = checker.keep_good(rows, non_finite, lambda k: "NaN or infinite value")
+    if id_columns:
+        ids = rows.numbers[:, list(id_columns)]
+        not_integer = (ids != np.round(ids)).any(axis=1) | (ids < 0).any(axis=1)
+        rows = checker.keep_good(rows, not_integer, lambda k: "node ids must be whole numbers ≥ 0")
+    return rows if len(rows) else None
+
+
+def _is_number(token: str) -> bool:
+    try:
+        float(token)
+    except ValueError:
+        return False
+    return True
+
+
+def symmetric_from_upper(values: np.ndarray, size: int) -> np.ndarray:
+    """(k, size, size) symmetric matrices from (k, size(size+1)/2) upper triangles, row-major."""
+    rows, cols = np.triu_indices(size)
+    out = np.zeros((values.shape[0], size, size))
+    out[:, rows, cols] = values
+    out[:, cols, rows] = values
+    return out
+
+
+def upper_from_symmetric(matrices: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`symmetric_from_upper`."""
+    rows, cols = np.triu_indices(matrices.shape[-1])
+    return matrices[:, rows, cols]
+
+
+def check_information(rows: Rows, information: np.ndarray, checker: LineChecker):
+    """Reject information matrices that are not symmetric positive definite."""
+    smallest = np.linalg.eigvalsh(information)[:, 0] if len(information) else np.zeros(0)
+    bad = ~(smallest > 0)
+    kept = checker.keep_good(
+        rows,
+        bad,
+        lambda k: f"information matrix is not positive definite (λ_min = {smallest[k]:.3g})",
+    )
+    return kept, information[~bad]
+
+
+def check_quaternions(rows: Rows, columns: slice, checker: LineChecker) -> Rows:
+    """Reject (near-)zero quaternions; others are normalised by the group constructors."""
+    norms = np.linalg.norm(rows.numbers[:, columns], axis=1)
+    return checker.keep_good(rows, norms < 1e-9, lambda k: "quaternion has zero norm")

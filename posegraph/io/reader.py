@@ -1,0 +1,223 @@
+"""Read g2o and TORO pose-graph files into a ``PoseGraph``, strictly or leniently."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections import Counter
+
+import numpy as np
+
+from ..graph import PoseGraph
+from ..initialization import spanning_tree_values
+from .errors import GraphFileError
+from .parsing import LineChecker, Rows, read_lines, to_rows
+from .tags import G2O_TAGS, TORO_TAGS, TagFormat
+
+ALL_TAGS: dict[str, TagFormat] = {**G2O_TAGS, **TORO_TAGS}
+
+
+@dataclasses.dataclass(frozen=True)
+class ReadOptions:
+    """How to read a file.
+
+    Attributes:
+        lenient: skip bad lines and unknown tags (reported in ``ReadResult.skipped``) instead of
+            stopping at the first.
+        g2o_rotation_information: read SE3 information the way g2o itself weighs it
+            (Λ_φφ = Λ_qq/4, Λ_ρφ = Λ_ρq/2) instead of as-is over (ρ, φ) like gtsam.
+    """
+
+    lenient: bool = False
+    g2o_rotation_information: bool = False
+
+
+@dataclasses.dataclass(frozen=True)
+class ReadResult:
+    """A graph and what reading it found."""
+
+    graph: PoseGraph
+    path: str
+    format: str
+    """"g2o" or "toro"."""
+    tag_counts: dict[str, int]
+    """Lines read per tag (skipped lines excluded)."""
+    skipped: list[tuple[int, str]]
+    """(line, reason) of every line skipped in lenient mode."""
+    nodes_without_vertex: np.ndarray
+    """Ids of nodes that had no vertex line, initialised by composing odometry."""
+    sim3_dialect: str | None
+    """"a" (element) or "b" (log of the inverse) for Sim3 files."""
+
+
+@dataclasses.dataclass
+class _Collected:
+    """Converted rows per kind, before the graph is assembled."""
+
+    vertices: list = dataclasses.field(default_factory=list)  # (rows, values)
+    edges: list = dataclasses.field(default_factory=list)  # (rows, measurements, information)
+    priors: list = dataclasses.field(default_factory=list)
+    fixes: list = dataclasses.field(default_factory=list)  # rows
+    equivalences: list = dataclasses.field(default_factory=list)  # rows
+
+
+def _check_information(rows: Rows, measurements, information, checker: LineChecker):
+    smallest = np.linalg.eigvalsh(information)[:, 0]
+    bad = ~(smallest > 0)
+    if not bad.any():
+        return rows, measurements, information
+    checker.keep_good(
+        rows,
+        bad,
+        lambda k: f"information matrix is not positive definite (λ_min = {smallest[k]:.3g})",
+    )
+    return rows.subset(~bad), measurements[~bad], information[~bad]
+
+
+def _convert(tag: str, spec: TagFormat, rows: Rows, options: ReadOptions, checker, collected):
+    columns = spec.quaternion.get(rows.numbers.shape[1])
+    if columns is not None:
+        norms = np.linalg.norm(rows.numbers[:, columns], axis=1)
+        rows = checker.keep_good(rows, norms < 1e-9, lambda k: "quaternion has zero norm")
+    if not len(rows):
+        return
+    if spec.kind == "vertex":
+        collected.vertices.append((rows, spec.parse(rows.numbers, options)))
+    elif spec.kind in ("edge", "prior"):
+        if spec.kind == "edge":
+            loops = rows.ids(0) == rows.ids(1)
+            rows = checker.keep_good(
+                rows, loops, lambda k: f"edge from node {rows.ids(0)[k]} to itself"
+            )
+            if not len(rows):
+                return
+        measurements, information = spec.parse(rows.numbers, options)
+        converted = _check_information(rows, measurements, information, checker)
+        if len(converted[0]):
+            (collected.edges if spec.kind == "edge" else collected.priors).append(converted)
+    elif spec.kind == "fix":
+        collected.fixes.append(rows)
+    else:
+        collected.equivalences.append(rows)
+
+
+def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
+    """Read a g2o or TORO file (told apart by their tags).
+
+    Raises ``GraphFileError`` naming ``file:line`` and the problem. Nodes that appear only in
+    edges are created; when the file has no vertex lines at all, every node is initialised by
+    composing odometry along a spanning tree.
+    """
+    path = str(path)
+    options = ReadOptions() if options is None else options
+    checker = LineChecker(path, options.lenient)
+    lines_by_tag: dict[str, list] = {}
+    for number, tokens in read_lines(path):
+        tag = tokens[0]
+        if tag not in ALL_TAGS:
+            checker.fail(number, f"unknown tag {tag!r}")
+            continue
+        lines_by_tag.setdefault(tag, []).append((number, tokens))
+    if not lines_by_tag:
+        raise GraphFileError(path, None, "holds no vertices or edges (is the file empty?)")
+
+    groups = {ALL_TAGS[t].group for t in lines_by_tag} - {None}
+    if len(groups) > 1:
+        names = sorted(g.__name__ for g in groups)
+        first = min(
+            lines_by_tag[t][0][0] for t in lines_by_tag if ALL_TAGS[t].group is not groups.pop()
+        )
+        raise GraphFileError(path, first, f"mixes {' and '.join(names)} lines in one graph")
+    if not groups:
+        first = min(entries[0][0] for entries in lines_by_tag.values())
+        raise GraphFileError(path, first, "holds no vertices or edges, only FIX or EQUIV lines")
+    group = groups.pop()
+
+    collected = _Collected()
+    for tag, entries in lines_by_tag.items():
+        spec = ALL_TAGS[tag]
+        rows = to_rows(tag, entries, spec.widths, spec.id_columns, checker)
+        if rows is not None:
+            _convert(tag, spec, rows, options, checker, collected)
+
+    graph, without_vertex = _assemble(group, collected, checker)
+    tag_counts = Counter()
+    for rows, *_ in collected.vertices + collected.edges + collected.priors:
+        tag_counts[rows.tag] += len(rows)
+    for rows in collected.fixes + collected.equivalences:
+        tag_counts[rows.tag] += len(rows)
+    sim3_dialect = None
+    if "VERTEX_SIM3:EXPMAP" in lines_by_tag or "EDGE_SIM3:EXPMAP" in lines_by_tag:
+        widths = {rows.numbers.shape[1] for rows, *_ in collected.vertices + collected.edges}
+        sim3_dialect = "a" if widths & {9, 38} else "b"
+    file_format = "toro" if any(t in TORO_TAGS for t in lines_by_tag) else "g2o"
+    return ReadResult(
+        graph, path, file_format, dict(tag_counts), checker.skipped, without_vertex, sim3_dialect
+    )
+
+
+def _assemble(group, collected: _Collected, checker: LineChecker):
+    graph = PoseGraph(group)
+    vertex_ids = np.zeros(0, dtype=np.int64)
+    if collected.vertices:
+        rows = [r for r, _ in collected.vertices]
+        vertex_ids = np.concatenate([r.ids(0) for r in rows])
+        lines = np.concatenate([r.line_numbers for r in rows])
+        values = group.concatenate([v for _, v in collected.vertices])
+        order = np.argsort(lines, kind="stable")
+        vertex_ids, lines, values = vertex_ids[order], lines[order], values[order]
+        _, first = np.unique(vertex_ids, return_index=True)
+        duplicate = np.ones(vertex_ids.size, dtype=bool)
+        duplicate[first] = False
+        for k in np.flatnonzero(duplicate):
+            original = lines[np.flatnonzero(vertex_ids == vertex_ids[k])[0]]
+            checker.fail(
+                int(lines[k]), f"vertex {vertex_ids[k]} is defined again (first on line {original})"
+            )
+        vertex_ids, values = vertex_ids[~duplicate], values[~duplicate]
+        graph.add_nodes(vertex_ids, values)
+
+    edges = []
+    for rows, measurements, information in collected.edges:
+        kept = _filter_known(rows, (0, 1), vertex_ids, bool(collected.vertices), checker)
+        edges.append((rows.ids(0)[kept], rows.ids(1)[kept], measurements[kept], information[kept]))
+    priors = []
+    for rows, measurements, information in collected.priors:
+        kept = _filter_known(rows, (0,), vertex_ids, bool(collected.vertices), checker)
+        priors.append((rows.ids(0)[kept], measurements[kept], information[kept]))
+
+    without_vertex = np.zeros(0, dtype=np.int64)
+    if not collected.vertices:
+        endpoints = [e[0] for e in edges] + [e[1] for e in edges] + [p[0] for p in priors]
+        without_vertex = np.unique(np.concatenate(endpoints)) if endpoints else without_vertex
+        graph.add_nodes(without_vertex, group.identity(without_vertex.shape))
+    for i, j, measurements, information in edges:
+        graph.add_edges(i, j, measurements, information)
+    for i, measurements, information in priors:
+        graph.add_priors(i, measurements, information)
+    for rows in collected.fixes:
+        kept = _filter_known(rows, (0,), graph.node_ids, True, checker)
+        graph.fix(rows.ids(0)[kept])
+    for rows in collected.equivalences:
+        kept = _filter_known(rows, (0, 1), graph.node_ids, True, checker)
+        pairs = np.stack([rows.ids(0)[kept], rows.ids(1)[kept]], axis=1)
+        graph.equivalences = np.concatenate([graph.equivalences, pairs])
+    if without_vertex.size:
+        graph.set_values(spanning_tree_values(graph))
+    return graph, without_vertex
+
+
+def _filter_known(rows: Rows, columns, known_ids: np.ndarray, check: bool, checker) -> np.ndarray:
+    """Mask of rows whose ids in ``columns`` are known nodes; the others are reported."""
+    keep = np.ones(len(rows), dtype=bool)
+    if not check:
+        return keep
+    for column in columns:
+        ids = rows.ids(column)
+        unknown = keep & ~np.isin(ids, known_ids)
+        for k in np.flatnonzero(unknown):
+            checker.fail(
+                int(rows.line_numbers[k]),
+                f"{rows.tag}: refers to node {ids[k]}, which has no vertex line",
+            )
+        keep &= ~unknown
+    return keep

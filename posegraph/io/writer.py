@@ -1,0 +1,141 @@
+"""Write a ``PoseGraph`` as g2o or TORO text, atomically, with round-trip-exact numbers."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..graph import PoseGraph
+from ..lie import SE2, SE3, Sim3
+from .atomic import atomic_write_text
+from .parsing import upper_from_symmetric
+from .tags import (
+    matrix_to_rpy,
+    se3_information_to_file,
+    sim3_information_to_file,
+    sim3_to_g2o_tangent,
+    toro2_information_to_file,
+)
+
+TORO_SUFFIXES = (".graph", ".toro")
+
+
+def _lines(tag: str, ids: list[np.ndarray], numbers: np.ndarray) -> list[str]:
+    """``TAG id… number…`` lines; floats printed with repr, which round-trips exactly."""
+    id_columns = [np.asarray(c).tolist() for c in ids]
+    rows = numbers.tolist()
+    out = []
+    for k, row in enumerate(rows):
+        fields = [tag] + [str(c[k]) for c in id_columns] + [repr(x) for x in row]
+        out.append(" ".join(fields))
+    return out
+
+
+def _pose_numbers(values, g2o_quaternion: bool) -> np.ndarray:
+    if isinstance(values, SE2):
+        return values.as_xytheta()
+    q, t = values.as_quaternion_translation()
+    if g2o_quaternion:
+        return np.concatenate([t, q], axis=1)
+    return np.concatenate([t, matrix_to_rpy(values.rotation)], axis=1)
+
+
+def _sim3_numbers(element: Sim3, dialect: str) -> np.ndarray:
+    """Dialect (a): the element (q, t, s); dialect (b): its log, in g2o's tangent order."""
+    if dialect == "a":
+        return np.concatenate(
+            [element.as_quaternion(), element.translation, element.scale[:, None]], 1
+        )
+    return sim3_to_g2o_tangent(element)
+
+
+def format_g2o(
+    graph: PoseGraph, g2o_rotation_information: bool = False, sim3_dialect: str = "a"
+) -> str:
+    """The graph as g2o text (VERTEX/EDGE lines of its group, priors, then FIX lines)."""
+    ids, edges, priors = graph.node_ids, graph.edges, graph.priors
+    i, j = ids[edges.i], ids[edges.j]
+    lines: list[str] = []
+    if graph.group is SE2:
+        lines += _lines("VERTEX_SE2", [ids], graph.values.as_xytheta())
+        info = upper_from_symmetric(edges.information)
+        lines += _lines("EDGE_SE2", [i, j], np.hstack([edges.measurements.as_xytheta(), info]))
+        prior_info = upper_from_symmetric(priors.information)
+        prior_numbers = np.hstack([priors.measurements.as_xytheta(), prior_info])
+        lines += _lines("EDGE_PRIOR_SE2", [ids[priors.i]], prior_numbers)
+    elif graph.group is SE3:
+        lines += _lines("VERTEX_SE3:QUAT", [ids], _pose_numbers(graph.values, True))
+        info = se3_information_to_file(edges.information, g2o_rotation_information)
+        lines += _lines(
+            "EDGE_SE3:QUAT", [i, j], np.hstack([_pose_numbers(edges.measurements, True), info])
+        )
+        prior_info = se3_information_to_file(priors.information, g2o_rotation_information)
+        prior_numbers = np.hstack([_pose_numbers(priors.measurements, True), prior_info])
+        lines += _lines(
+            "EDGE_SE3_PRIOR", [ids[priors.i], np.zeros(len(priors), int)], prior_numbers
+        )
+    else:
+        if len(priors):
+            raise ValueError(
+                "g2o has no Sim3 prior line; write the priors' graph as SE3 or drop them"
+            )
+        if sim3_dialect not in ("a", "b"):
+            raise ValueError(f"Sim3 dialect is 'a' or 'b', not {sim3_dialect!r}")
+        # g2o stores the world → camera element Sᵢ = Xᵢ⁻¹ and the edge Z = (our measurement)⁻¹,
+        # except dialect (b), which writes log(Sᵢ⁻¹) and log(Z⁻¹): our elements themselves.
+        vertices = graph.values.inverse() if sim3_dialect == "a" else graph.values
+        measured = edges.measurements.inverse() if sim3_dialect == "a" else edges.measurements
+        vertex_numbers = _sim3_numbers(vertices, sim3_dialect)
+        if sim3_dialect == "b":  # followed by fx fy cx cy, which the graph does not hold
+            vertex_numbers = np.hstack(
+                [vertex_numbers, np.tile([1.0, 1.0, 0.0, 0.0], (len(ids), 1))]
+            )
+        lines += _lines("VERTEX_SIM3:EXPMAP", [ids], vertex_numbers)
+        info = sim3_information_to_file(edges.information)
+        lines += _lines(
+            "EDGE_SIM3:EXPMAP", [i, j], np.hstack([_sim3_numbers(measured, sim3_dialect), info])
+        )
+    lines += [f"FIX {k}" for k in ids[graph.fixed].tolist()]
+    return "\n".join(lines) + "\n"
+
+
+def format_toro(graph: PoseGraph) -> str:
+    """The graph as TORO text (VERTEX2/EDGE2 or VERTEX3/EDGE3, then EQUIV lines)."""
+    if graph.group is Sim3:
+        raise ValueError("TORO has no Sim3 lines; write g2o instead")
+    if len(graph.priors) or graph.fixed.any():
+        raise ValueError("TORO has no prior or FIX lines; write g2o to keep them")
+    ids, edges = graph.node_ids, graph.edges
+    i, j = ids[edges.i], ids[edges.j]
+    if graph.group is SE2:
+        lines = _lines("VERTEX2", [ids], graph.values.as_xytheta())
+        info = toro2_information_to_file(edges.information)
+        lines += _lines("EDGE2", [i, j], np.hstack([edges.measurements.as_xytheta(), info]))
+    else:
+        lines = _lines("VERTEX3", [ids], _pose_numbers(graph.values, False))
+        info = upper_from_symmetric(edges.information)
+        lines += _lines(
+            "EDGE3", [i, j], np.hstack([_pose_numbers(edges.measurements, False), info])
+        )
+    lines += [f"EQUIV {a} {b}" for a, b in graph.equivalences.tolist()]
+    return "\n".join(lines) + "\n"
+
+
+def write_graph(
+    graph: PoseGraph,
+    path: str,
+    file_format: str | None = None,
+    g2o_rotation_information: bool = False,
+    sim3_dialect: str = "a",
+) -> None:
+    """Write atomically; the format is "g2o" or "toro", or guessed from the suffix."""
+    if file_format is None:
+        file_format = "toro" if Path(path).suffix.lower() in TORO_SUFFIXES else "g2o"
+    if file_format == "toro":
+        text = format_toro(graph)
+    elif file_format == "g2o":
+        text = format_g2o(graph, g2o_rotation_information, sim3_dialect)
+    else:
+        raise ValueError(f"unknown graph format {file_format!r}; use 'g2o' or 'toro'")
+    atomic_write_text(path, text)

@@ -1,0 +1,7 @@
+"""Nonlinear least-squares solvers: Gauss-Newton and Levenberg-Marquardt."""
+
+from .optimize import Callback, optimize
+from .options import SolverOptions
+from .summary import IterationRecord, Result, Summary
+
+__all__ = ["Callback", "IterationRecord", "Result", "SolverOptions", "Summary", "optimize"]

@@ -1,0 +1,214 @@
+"""Gauss-Newton and Levenberg-Marquardt over the fixed-pattern normal equations.
+
+One loop serves both. Each iteration solves (H + λD) δ = −g, with λ = 0 for Gauss-Newton,
+tries X ⊕ δ (right retraction on every free node), and accepts the step only if the error is
+finite and lower. Levenberg-Marquardt updates λ by the gain ratio
+ρ = (actual decrease) / (predicted decrease ½ δᵀ(λDδ − g)): on success
+λ ← λ·max(1/3, 1 − (2ρ − 1)³) and ν ← 2; on failure λ ← λ·ν and ν ← 2ν
+(Nielsen 1999; Madsen, Nielsen & Tingleff 2004, §3.2).
+A rejected step costs a refactorisation only; the linearisation is kept.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from ..factors import Linearization, linearize_between, linearize_priors, weighted_squares
+from ..graph import PoseGraph
+from ..lie import LieGroup
+from ..linear import NormalEquations
+from ..sparse_cholesky import NotPositiveDefinite
+from .options import SolverOptions
+from .summary import IterationRecord, Result, Summary
+
+Callback = Callable[[IterationRecord], bool | None]
+"""Called after every iteration; returning True stops the run ("stopped by callback")."""
+
+_PHASES = ("linearize", "assemble", "factorize", "solve", "other")
+
+
+class _Clock:
+    """Accumulates wall-clock time per phase."""
+
+    def __init__(self) -> None:
+        self.start = time.perf_counter()
+        self.times = dict.fromkeys(_PHASES, 0.0)
+        self._mark = self.start
+
+    def lap(self, phase: str) -> None:
+        now = time.perf_counter()
+        self.times[phase] += now - self._mark
+        self._mark = now
+
+    def elapsed(self) -> float:
+        return time.perf_counter() - self.start
+
+
+class _Linearized:
+    """Residuals, Jacobians and error of the whole graph at some values."""
+
+    def __init__(self, graph: PoseGraph, values: LieGroup) -> None:
+        self.values = values
+        self.between: Linearization = linearize_between(values, graph.edges)
+        self.priors: Linearization = linearize_priors(values, graph.priors)
+        chi2 = weighted_squares(self.between.residuals, graph.edges.information).sum()
+        chi2 += weighted_squares(self.priors.residuals, graph.priors.information).sum()
+        self.error = 0.5 * float(chi2)
+
+
+def optimize(
+    graph: PoseGraph,
+    options: SolverOptions | None = None,
+    callback: Callback | None = None,
+    system: NormalEquations | None = None,
+) -> Result:
+    """Minimise ½ Σ rᵀΩr over the graph's free nodes, starting from ``graph.values``.
+
+    The gauge is ``graph.gauge_nodes()`` (fixed nodes, or the lowest id of each component
+    without a prior). ``system`` passes in a ``NormalEquations`` built earlier for the same
+    structure, to reuse its pattern and symbolic factorisation. The graph is not modified.
+    """
+    options = SolverOptions() if options is None else options
+    clock = _Clock()
+    reused = []
+    if system is None:
+        system = NormalEquations(graph, graph.gauge_nodes(), options.linear_solver)
+    else:
+        reused = ["sparsity pattern", "symbolic factorization"]
+    clock.lap("other")
+    current = _Linearized(graph, graph.values)
+    clock.lap("linearize")
+    initial_error = current.error
+    history: list[IterationRecord] = []
+    termination, converged = "maximum iterations reached", False
+
+    if system.size == 0 or options.max_iterations == 0:
+        termination = "nothing to optimise" if system.size == 0 else "maximum iterations reached"
+        converged = system.size == 0
+        return _result(
+            graph,
+            current,
+            options,
+            system,
+            clock,
+            initial_error,
+            history,
+            termination,
+            converged,
+            reused,
+        )
+
+    data, gradient = system.assemble(
+        current.between, graph.edges.information, current.priors, graph.priors.information
+    )
+    clock.lap("assemble")
+    lm = options.method == "lm"
+    diagonal = system.diagonal(data)
+    if options.damping == "diagonal":
+        lam = options.initial_damping
+    else:
+        lam = options.initial_damping * float(diagonal.max())
+    nu = 2.0
+
+    for iteration in range(1, options.max_iterations + 1):
+        if np.max(np.abs(gradient)) < options.gradient_tolerance:
+            termination, converged = "gradient below tolerance", True
+            break
+        if options.time_limit is not None and clock.elapsed() > options.time_limit:
+            termination = "time limit reached"
+            break
+        if options.damping == "diagonal":
+            scale = np.clip(diagonal, options.min_diagonal, options.max_diagonal)
+        else:
+            scale = np.ones_like(diagonal)
+        damping = lam * scale if lm else None
+        try:
+            system.factorize(data, damping)
+            clock.lap("factorize")
+            step = system.solve(-gradient)
+            clock.lap("solve")
+            step_ok = bool(np.all(np.isfinite(step)))
+        except NotPositiveDefinite:
+            clock.lap("factorize")
+            step, step_ok = np.zeros_like(gradient), False
+
+        trial = None
+        if step_ok:
+            trial_values = current.values.retract(system.scatter(step, graph.num_nodes))
+            trial = _Linearized(graph, trial_values)
+            clock.lap("linearize")
+        step_norm = float(np.linalg.norm(step))
+        accepted = trial is not None and np.isfinite(trial.error) and trial.error < current.error
+        decrease = current.error - trial.error if accepted else 0.0
+        if accepted:
+            if lm:
+                predicted = 0.5 * float(step @ (lam * scale * step - gradient))
+                rho = decrease / predicted if predicted > 0 else 0.0
+                lam *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+                nu = 2.0
+            previous_error, current = current.error, trial
+        elif lm:
+            lam *= nu
+            nu *= 2.0
+        record = IterationRecord(
+            iteration, current.error, lam if lm else 0.0, step_norm, accepted, clock.elapsed()
+        )
+        history.append(record)
+        if callback is not None and callback(record):
+            termination = "stopped by callback"
+            break
+        if not accepted:
+            if not lm:
+                termination = "step raised the error (Gauss-Newton)"
+                break
+            if not np.isfinite(lam) or lam > options.max_diagonal:
+                termination = "damping exceeded its limit (no step lowers the error)"
+                break
+            continue
+        if decrease <= options.relative_decrease * previous_error:
+            termination, converged = "relative error decrease below tolerance", True
+            break
+        size = float(np.linalg.norm(current.values.log()))
+        if step_norm < options.step_tolerance * (size + options.step_tolerance):
+            termination, converged = "step below tolerance", True
+            break
+        data, gradient = system.assemble(
+            current.between, graph.edges.information, current.priors, graph.priors.information
+        )
+        diagonal = system.diagonal(data)
+        clock.lap("assemble")
+    return _result(
+        graph,
+        current,
+        options,
+        system,
+        clock,
+        initial_error,
+        history,
+        termination,
+        converged,
+        reused,
+    )
+
+
+def _result(
+    graph, current, options, system, clock, initial_error, history, termination, converged, reused
+) -> Result:
+    clock.lap("other")
+    summary = Summary(
+        method=options.method,
+        linear_solver=system.cholesky.name,
+        initial_error=initial_error,
+        final_error=current.error,
+        iterations=history,
+        termination=termination,
+        converged=converged,
+        phase_times=dict(clock.times),
+        total_time=clock.elapsed(),
+        num_variables=system.size,
+        reused=reused,
+    )
+    return Result(current.values, summary)

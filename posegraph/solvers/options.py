@@ -1,0 +1,46 @@
+"""Solver options (frozen, so a configuration can be shared and reused safely)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+
+@dataclasses.dataclass(frozen=True)
+class SolverOptions:
+    """How ``optimize`` iterates and when it stops.
+
+    Attributes:
+        method: "lm" (Levenberg-Marquardt with Nielsen's gain-ratio damping update) or "gn"
+            (Gauss-Newton; a step that raises the error ends the run).
+        max_iterations: most iterations, accepted or rejected.
+        time_limit: seconds of wall-clock time after which the run stops (None: no limit).
+        relative_decrease: stop when an accepted step lowers the error by less than this
+            fraction of it.
+        gradient_tolerance: stop when the largest gradient entry, max|Jᵀ Ω r|, falls below this.
+        step_tolerance: stop when |δ| < step_tolerance · (|x| + step_tolerance), with |x| the norm
+            of the stacked node tangents (Log of each value).
+        damping: "diagonal" damps with λ·diag(H) (Marquardt, scale-invariant); "identity" with λ·I.
+        initial_damping: λ at the start, relative to max diag(H) for "identity" damping.
+        min_diagonal, max_diagonal: clamp diag(H) before using it as damping (as Ceres does).
+        linear_solver: "auto", "cholmod" or "scipy" (see ``posegraph.sparse_cholesky``).
+    """
+
+    method: str = "lm"
+    max_iterations: int = 100
+    time_limit: float | None = None
+    relative_decrease: float = 1e-7
+    gradient_tolerance: float = 1e-10
+    step_tolerance: float = 1e-12
+    damping: str = "diagonal"
+    initial_damping: float = 1e-10
+    min_diagonal: float = 1e-6
+    max_diagonal: float = 1e32
+    linear_solver: str = "auto"
+
+    def __post_init__(self) -> None:
+        if self.method not in ("lm", "gn"):
+            raise ValueError(f"method is 'lm' or 'gn', not {self.method!r}")
+        if self.damping not in ("diagonal", "identity"):
+            raise ValueError(f"damping is 'diagonal' or 'identity', not {self.damping!r}")
+        if self.max_iterations < 0:
+            raise ValueError("max_iterations must be ≥ 0")

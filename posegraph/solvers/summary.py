@@ -1,0 +1,88 @@
+"""What an optimisation returns: the values and a summary of how it went."""
+
+from __future__ import annotations
+
+import dataclasses
+
+from ..lie import LieGroup
+
+
+@dataclasses.dataclass(frozen=True)
+class IterationRecord:
+    """One iteration: the error after it (½ Σ rᵀΩr), λ used, the step's norm, and whether the
+    step was accepted."""
+
+    iteration: int
+    error: float
+    damping: float
+    step_norm: float
+    accepted: bool
+    elapsed: float
+    """Seconds since the start of ``optimize``."""
+
+
+@dataclasses.dataclass
+class Summary:
+    """How an optimisation went. ``error`` is ½ Σ rᵀΩr (gtsam's); ``chi2`` is Σ rᵀΩr (g2o's)."""
+
+    method: str
+    linear_solver: str
+    initial_error: float
+    final_error: float
+    iterations: list[IterationRecord]
+    termination: str
+    converged: bool
+    phase_times: dict[str, float]
+    """Seconds spent in: linearize, assemble, factorize, solve, other."""
+    total_time: float
+    num_variables: int
+    """Size of the linear system (free nodes × dof)."""
+    reused: list[str] = dataclasses.field(default_factory=list)
+    """What a warm start reused (for example "sparsity pattern", "symbolic factorization")."""
+
+    @property
+    def initial_chi2(self) -> float:
+        return 2.0 * self.initial_error
+
+    @property
+    def final_chi2(self) -> float:
+        return 2.0 * self.final_error
+
+    @property
+    def num_iterations(self) -> int:
+        return len(self.iterations)
+
+    def as_dict(self) -> dict:
+        """A JSON-ready dictionary."""
+        return {
+            "method": self.method,
+            "linear_solver": self.linear_solver,
+            "initial_error": self.initial_error,
+            "final_error": self.final_error,
+            "initial_chi2": self.initial_chi2,
+            "final_chi2": self.final_chi2,
+            "iterations": self.num_iterations,
+            "termination": self.termination,
+            "converged": self.converged,
+            "phase_times": dict(self.phase_times),
+            "total_time": self.total_time,
+            "num_variables": self.num_variables,
+            "reused": list(self.reused),
+            "history": [dataclasses.asdict(r) for r in self.iterations],
+        }
+
+
+@dataclasses.dataclass(frozen=True)
+class Result:
+    """Optimised node values (in the graph's node order) and the summary."""
+
+    values: LieGroup
+    summary: Summary
+
+    def values_of(self, graph, node_ids) -> LieGroup:
+        """The optimised values of some nodes of ``graph``."""
+        return self.values[graph.index(node_ids)]
+
+    @property
+    def error(self) -> float:
+        return self.summary.final_error
