@@ -22,9 +22,9 @@ _COMPONENT_ROOT_WEIGHT = 4.0  # a component with no known value starts at the id
 
 
 def odometry_mask(graph: PoseGraph) -> np.ndarray:
-    """Edges between consecutive ids (i → i+1 or i+1 → i)."""
-    ids = graph.node_ids
-    return np.abs(ids[graph.edges.j] - ids[graph.edges.i]) == 1
+    """Edges between consecutive nodes (in the order they were added: for a file, vertex order,
+    or increasing id when it has no vertex lines), in either direction."""
+    return np.abs(graph.edges.j - graph.edges.i) == 1
 
 
 def spanning_tree_values(graph: PoseGraph, known: np.ndarray | None = None) -> LieGroup:

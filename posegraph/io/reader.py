@@ -120,13 +120,20 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
     if not lines_by_tag:
         raise GraphFileError(path, None, "holds no vertices or edges (is the file empty?)")
 
-    groups = {ALL_TAGS[t].group for t in lines_by_tag} - {None}
+    first_line_of_group: dict = {}
+    for tag, entries in lines_by_tag.items():
+        group = ALL_TAGS[tag].group
+        if group is not None:
+            first_line_of_group[group] = min(
+                first_line_of_group.get(group, entries[0][0]), entries[0][0]
+            )
+    groups = set(first_line_of_group)
     if len(groups) > 1:
-        names = sorted(g.__name__ for g in groups)
-        first = min(
-            lines_by_tag[t][0][0] for t in lines_by_tag if ALL_TAGS[t].group is not groups.pop()
+        in_order = sorted(groups, key=first_line_of_group.get)
+        names = " and ".join(g.__name__ for g in in_order)
+        raise GraphFileError(
+            path, first_line_of_group[in_order[1]], f"mixes {names} lines in one graph"
         )
-        raise GraphFileError(path, first, f"mixes {' and '.join(names)} lines in one graph")
     if not groups:
         first = min(entries[0][0] for entries in lines_by_tag.values())
         raise GraphFileError(path, first, "holds no vertices or edges, only FIX or EQUIV lines")

@@ -40,8 +40,10 @@ def _so3_exp(phi) -> ca.SX:
 
 
 def _so3_log(r) -> ca.SX:
-    theta = ca.acos((ca.trace(r) - 1) / 2)
-    return theta / (2 * ca.sin(theta)) * _unskew(r - r.T)
+    """φ = θ v/|v| with v = vee(R − Rᵀ)/2 = sin θ · axis and θ = atan2(|v|, (tr R − 1)/2)."""
+    v = 0.5 * _unskew(r - r.T)
+    sin = ca.norm_2(v)
+    return ca.atan2(sin, (ca.trace(r) - 1) / 2) / sin * v
 
 
 def _so3_v(phi) -> ca.SX:
@@ -89,7 +91,11 @@ def _exp(group: type[LieGroup], xi) -> ca.SX:
     if group is Sim3:
         linear = ca.exp(xi[6]) * _so3_exp(xi[3:6])
         return _homogeneous(linear, _sim3_w(xi[6], xi[3:6]) @ xi[:3])
-    # Matrix groups: exp(A) = (Σ_k (A/2^s)^k / k!)^(2^s).
+    return series_exp(group, xi)
+
+
+def series_exp(group: type[LieGroup], xi) -> ca.SX:
+    """exp(hat ξ) = (Σ_k (hat ξ / 2⁸)^k / k!)^(2⁸): smooth everywhere, including at ξ = 0."""
     a = _hat(group, xi) / 2**8
     term, total = ca.SX.eye(group.matrix_size), ca.SX.eye(group.matrix_size)
     for k in range(1, 14):
@@ -131,6 +137,57 @@ def _vee(group: type[LieGroup], m) -> ca.SX:
     """Linear read-off of algebra coordinates (row-major flatten, then the dual basis)."""
     dual = np.linalg.pinv(group.generators().reshape(group.dof, -1))
     return ca.DM(dual.T) @ ca.reshape(m.T, -1, 1)
+
+
+def between_residual(group: type[LieGroup], x_i, x_j, z) -> ca.SX:
+    """r = Log(Z⁻¹ Xᵢ⁻¹ Xⱼ) on matrices (CONVENTIONS.md), with the model's closed-form Log."""
+    return _log(group, ca.inv(z) @ ca.inv(x_i) @ x_j)
+
+
+def between_jacobians(group: type[LieGroup], x_i, x_j, z) -> tuple[np.ndarray, np.ndarray]:
+    """casadi's derivatives of r(Xᵢ·Exp(δᵢ), Xⱼ·Exp(δⱼ)) at δ = 0, for numeric 4×4 / 3×3 inputs."""
+    n = group.dof
+    d_i, d_j = ca.SX.sym("di", n), ca.SX.sym("dj", n)
+    r = between_residual(
+        group, ca.DM(x_i) @ series_exp(group, d_i), ca.DM(x_j) @ series_exp(group, d_j), ca.DM(z)
+    )
+    function = ca.Function("J", [d_i, d_j], [ca.jacobian(r, d_i), ca.jacobian(r, d_j)])
+    jac_i, jac_j = function(np.zeros(n), np.zeros(n))
+    return np.asarray(jac_i), np.asarray(jac_j)
+
+
+def graph_cost(graph, held: np.ndarray):
+    """The graph's ½ Σ rᵀΩr as a casadi function of the free nodes' perturbations δ.
+
+    Node k is Xₖ·Exp(δₖ) around its current value; held nodes stay at theirs. Returns
+    (δ symbol, cost expression, a function mapping a numeric δ to the node matrices).
+    """
+    group, n = graph.group, graph.group.dof
+    free = np.setdiff1d(np.arange(graph.num_nodes), held)
+    delta = ca.SX.sym("delta", free.size * n)
+    base = graph.values.as_matrix()
+    nodes = [ca.DM(m) for m in base]
+    for slot, k in enumerate(free):
+        nodes[k] = ca.DM(base[k]) @ series_exp(group, delta[slot * n : (slot + 1) * n])
+    cost = 0
+    edges = graph.edges
+    measurements = edges.measurements.as_matrix()
+    for e in range(len(edges)):
+        r = between_residual(group, nodes[edges.i[e]], nodes[edges.j[e]], ca.DM(measurements[e]))
+        cost += 0.5 * r.T @ ca.DM(edges.information[e]) @ r
+    priors = graph.priors
+    prior_measurements = priors.measurements.as_matrix()
+    for e in range(len(priors)):
+        r = _log(group, ca.inv(ca.DM(prior_measurements[e])) @ nodes[priors.i[e]])
+        cost += 0.5 * r.T @ ca.DM(priors.information[e]) @ r
+    node_function = ca.Function("nodes", [delta], [ca.vertcat(*[ca.vec(m) for m in nodes])])
+
+    def node_matrices(delta_value: np.ndarray) -> np.ndarray:
+        size = group.matrix_size
+        flat = np.asarray(node_function(delta_value)).reshape(graph.num_nodes, size, size)
+        return np.swapaxes(flat, 1, 2)  # casadi's vec is column-major
+
+    return delta, cost, node_matrices
 
 
 def has_log(group: type[LieGroup]) -> bool:

@@ -1,0 +1,71 @@
+"""Fixtures shared by the test suite: benchmark graphs and small generated graphs."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from posegraph.datasets_paths import gtsam_data_dir, shared_datasets_dir
+from posegraph.graph import PoseGraph
+from posegraph.lie import SE2, SE3, LieGroup, Sim3
+
+
+@pytest.fixture(scope="session")
+def shared_dataset():
+    """Path to a graph of ../shared/datasets; skips the test when that folder is absent."""
+    folder = shared_datasets_dir()
+
+    def find(name: str) -> Path:
+        if folder is None:
+            pytest.skip("../shared/datasets is not beside this checkout (benchmark graphs needed)")
+        return folder / name
+
+    return find
+
+
+@pytest.fixture(scope="session")
+def gtsam_dataset():
+    """Path to a file of the gtsam wheel's Data/ folder; skips when gtsam is not installed."""
+    folder = gtsam_data_dir()
+
+    def find(name: str) -> Path:
+        if folder is None or not (folder / name).is_file():
+            pytest.skip(f"gtsam's Data/{name} is not available (install the test extra)")
+        return folder / name
+
+    return find
+
+
+def random_graph(
+    group: type[LieGroup],
+    num_nodes: int,
+    num_loops: int,
+    seed: int,
+    noise: float = 0.05,
+    priors: int = 0,
+) -> PoseGraph:
+    """A chain of ``num_nodes`` poses with ``num_loops`` extra edges, noisy measurements,
+    random SPD information, and initial values perturbed from the truth."""
+    rng = np.random.default_rng(seed)
+    truth = group.exp(0.5 * rng.normal(size=(num_nodes, group.dof)))
+    ids = np.arange(num_nodes) * 2 + 10  # non-contiguous ids
+    i = np.concatenate([np.arange(num_nodes - 1), rng.integers(0, num_nodes, num_loops)])
+    j = np.concatenate([np.arange(1, num_nodes), rng.integers(0, num_nodes, num_loops)])
+    keep = i != j
+    i, j = i[keep], j[keep]
+    d = group.dof
+    measured = truth[i].between(truth[j]).retract(noise * rng.normal(size=(i.size, d)))
+    a = rng.normal(size=(i.size, d, d))
+    information = a @ np.swapaxes(a, 1, 2) + d * np.eye(d)
+    graph = PoseGraph(group)
+    graph.add_nodes(ids, truth.retract(noise * rng.normal(size=(num_nodes, d))))
+    graph.add_edges(ids[i], ids[j], measured, information)
+    if priors:
+        nodes = rng.choice(num_nodes, priors, replace=False)
+        graph.add_priors(ids[nodes], truth[nodes], np.eye(d) * 10.0)
+    return graph
+
+
+POSE_GROUPS = [SE2, SE3, Sim3]

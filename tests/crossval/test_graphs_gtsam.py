@@ -1,0 +1,157 @@
+"""Error, gradient and optimum against gtsam on the same graphs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from posegraph.datasets_paths import BEST_KNOWN_ERROR
+from posegraph.factors import linearize_between, linearize_priors
+from posegraph.io import read_graph
+from posegraph.lie import SE2, SE3, Sim3
+from posegraph.linear import NormalEquations
+from posegraph.solvers import optimize
+
+from ..conftest import random_graph
+
+gtsam = pytest.importorskip("gtsam")
+bridge = pytest.importorskip("posegraph.validation.gtsam_bridge")
+
+
+def _our_error_and_gradient(graph):
+    system = NormalEquations(graph, np.zeros(0, dtype=np.int64), "scipy")
+    lin = linearize_between(graph.values, graph.edges)
+    prior_lin = linearize_priors(graph.values, graph.priors)
+    data, gradient = system.assemble(
+        lin, graph.edges.information, prior_lin, graph.priors.information
+    )
+    chi2 = np.einsum("mi,mij,mj->", lin.residuals, graph.edges.information, lin.residuals)
+    chi2 += np.einsum(
+        "mi,mij,mj->", prior_lin.residuals, graph.priors.information, prior_lin.residuals
+    )
+    return 0.5 * chi2, gradient.reshape(graph.num_nodes, graph.group.dof)
+
+
+def _assert_agrees_at_initial_values(graph, check_gradient: bool = True):
+    factors, values = bridge.graph_to_gtsam(graph, hold_gauge=False)
+    error, gradient = _our_error_and_gradient(graph)
+    assert error == pytest.approx(factors.error(values), rel=1e-9)
+    if check_gradient:
+        expected = bridge.gradient_from_gtsam(graph, factors, values)
+        scale = np.abs(expected).max()
+        np.testing.assert_allclose(gradient, expected, rtol=1e-9, atol=1e-9 * scale)
+
+
+def _pose2_edges_with_inexact_gtsam_jacobian(graph) -> np.ndarray:
+    """Edges whose residual hits gtsam 4.3's inexact Pose2::LogmapDerivative.
+
+    For small rotation residuals gtsam's analytic derivative differs from central differences
+    of its own Pose2::Logmap (by ≈ θ/2 in the rotation-translation entries, and by 5% at
+    θ = 1.4e-5 on intel edge 995→996); there its gradient is not the gradient of its error.
+    """
+    residuals = linearize_between(graph.values, graph.edges).residuals
+    h, flagged = 1e-6, []
+    for k, r in enumerate(residuals):
+        pose = gtsam.Pose2.Expmap(r)
+        numeric = np.stack(
+            [
+                (gtsam.Pose2.Logmap(pose.retract(h * e)) - gtsam.Pose2.Logmap(pose.retract(-h * e)))
+                / (2 * h)
+                for e in np.eye(3)
+            ],
+            axis=1,
+        )
+        if np.abs(gtsam.Pose2.LogmapDerivative(pose) - numeric).max() > 1e-8:
+            flagged.append(k)
+    return np.asarray(flagged, dtype=np.int64)
+
+
+def _numeric_gtsam_gradient(graph, factors, values, nodes: np.ndarray) -> np.ndarray:
+    """Central differences of gtsam's own graph.error, factor by factor, at the given nodes."""
+    h = 1e-5
+    out = np.zeros((nodes.size, graph.group.dof))
+    keys = graph.node_ids
+    wanted = {int(keys[n]): slot for slot, n in enumerate(nodes)}
+    for f in range(factors.size()):
+        factor = factors.at(f)
+        for key in factor.keys():
+            if key not in wanted:
+                continue
+            pose = values.atPose2(key)
+            for c in range(graph.group.dof):
+                shifted = []
+                for sign in (1.0, -1.0):
+                    moved = gtsam.Values(values)
+                    moved.update(key, pose.retract(sign * h * np.eye(graph.group.dof)[c]))
+                    shifted.append(factor.error(moved))
+                out[wanted[key], c] += (shifted[0] - shifted[1]) / (2 * h)
+    return out
+
+
+@pytest.mark.parametrize("name", ["sphere2500.g2o", "parking-garage.g2o"])
+def test_error_and_gradient_at_initial_values(shared_dataset, name):
+    _assert_agrees_at_initial_values(read_graph(shared_dataset(name)).graph)
+
+
+def test_error_and_gradient_at_initial_values_on_intel(shared_dataset):
+    """Error to 1e-9. Gradient: to 1e-9 against gtsam's linearisation at nodes untouched by
+    its inexact Pose2 Jacobian, and against gtsam's error differentiated numerically at the
+    others (1e-6: the accuracy of central differences on these weights)."""
+    graph = read_graph(shared_dataset("intel.g2o")).graph
+    factors, values = bridge.graph_to_gtsam(graph, hold_gauge=False)
+    error, gradient = _our_error_and_gradient(graph)
+    assert error == pytest.approx(factors.error(values), rel=1e-9)
+    flagged = _pose2_edges_with_inexact_gtsam_jacobian(graph)
+    assert flagged.size > 0  # the defect is real on this graph; else the split below is moot
+    touched = np.unique(np.concatenate([graph.edges.i[flagged], graph.edges.j[flagged]]))
+    clean = np.setdiff1d(np.arange(graph.num_nodes), touched)
+    expected = bridge.gradient_from_gtsam(graph, factors, values)
+    scale = np.abs(expected).max()
+    np.testing.assert_allclose(gradient[clean], expected[clean], rtol=1e-9, atol=1e-9 * scale)
+    numeric = _numeric_gtsam_gradient(graph, factors, values, touched)
+    np.testing.assert_allclose(gradient[touched], numeric, rtol=1e-6, atol=1e-6 * scale)
+
+
+def test_error_and_gradient_on_pose3example(gtsam_dataset):
+    _assert_agrees_at_initial_values(read_graph(gtsam_dataset("pose3example.txt")).graph)
+
+
+@pytest.mark.parametrize("group", [SE2, SE3], ids=lambda g: g.__name__)
+def test_error_and_gradient_with_priors(group):
+    _assert_agrees_at_initial_values(random_graph(group, 15, 10, seed=21, noise=0.3, priors=3))
+
+
+def test_sim3_error_equals_gtsam():
+    """gtsam's Sim3 between factor omits the Logmap Jacobian, so only the error is compared."""
+    _assert_agrees_at_initial_values(random_graph(Sim3, 15, 10, seed=22, noise=0.3), False)
+
+
+def _gtsam_optimum(graph) -> float:
+    factors, values = bridge.graph_to_gtsam(graph)
+    result = gtsam.LevenbergMarquardtOptimizer(factors, values).optimize()
+    return factors.error(result)
+
+
+@pytest.mark.parametrize(
+    "name",
+    [
+        "tinyGrid3D.g2o",
+        "smallGrid3D.g2o",
+        "intel.g2o",
+        "MIT.g2o",
+        "sphere2500.g2o",
+        "parking-garage.g2o",
+    ],
+)
+def test_optimum_is_gtsams_or_lower(shared_dataset, name):
+    graph = read_graph(shared_dataset(name)).graph
+    ours = optimize(graph).summary.final_error
+    assert ours <= _gtsam_optimum(graph) * (1 + 1e-6)
+
+
+@pytest.mark.parametrize("name", ["CSAIL.g2o", "manhattan.g2o"])
+def test_odometry_initialised_graphs_reach_the_best_known_error(shared_dataset, name):
+    result = read_graph(shared_dataset(name))
+    assert result.nodes_without_vertex.size == result.graph.num_nodes
+    ours = optimize(result.graph).summary.final_error
+    assert ours <= BEST_KNOWN_ERROR[name] * (1 + 1e-6)

@@ -1,0 +1,231 @@
+"""Reading and writing g2o and TORO: every tag, round trips, FIX, options, initialisation."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from posegraph.graph import PoseGraph
+from posegraph.io import GraphFileError, ReadOptions, read_graph, write_graph
+from posegraph.lie import SE2, SE3, Sim3
+from posegraph.solvers import optimize
+
+from .conftest import random_graph
+
+
+def _assert_same_graph(a: PoseGraph, b: PoseGraph, atol: float = 0.0) -> None:
+    assert a.group is b.group
+    np.testing.assert_array_equal(a.node_ids, b.node_ids)
+    np.testing.assert_allclose(a.values.as_matrix(), b.values.as_matrix(), atol=atol, rtol=0)
+    for x, y in ((a.edges, b.edges), (a.priors, b.priors)):
+        np.testing.assert_array_equal(a.node_ids[x.i], b.node_ids[y.i])
+        np.testing.assert_array_equal(a.node_ids[x.j], b.node_ids[y.j])
+        np.testing.assert_allclose(
+            x.measurements.as_matrix(), y.measurements.as_matrix(), atol=atol, rtol=0
+        )
+        np.testing.assert_allclose(x.information, y.information, rtol=1e-15, atol=atol)
+    np.testing.assert_array_equal(a.fixed, b.fixed)
+    np.testing.assert_array_equal(a.equivalences, b.equivalences)
+
+
+def _round_trip(graph, path, **write_options):
+    write_graph(graph, str(path), **write_options)
+    options = ReadOptions(
+        g2o_rotation_information=write_options.get("g2o_rotation_information", False)
+    )
+    return read_graph(str(path), options)
+
+
+# Numbers are printed with repr (shortest exact form), so a read → write → read round trip
+# reproduces every number bit for bit; SE3 rotations pass through quaternion → matrix →
+# quaternion, which is exact only to a few ulps.
+ROUND_TRIP_ATOL = {SE2: 0.0, SE3: 1e-15}
+
+
+@pytest.mark.parametrize("group", [SE2, SE3], ids=lambda g: g.__name__)
+def test_g2o_round_trip_is_exact_to_printed_precision(group, tmp_path):
+    graph = random_graph(group, 9, 5, seed=31, priors=2)
+    graph.fix(graph.node_ids[[1, 4]])
+    first = _round_trip(graph, tmp_path / "a.g2o").graph
+    _assert_same_graph(first, graph, atol=1e-12)
+    second = _round_trip(first, tmp_path / "b.g2o").graph
+    _assert_same_graph(second, first, atol=ROUND_TRIP_ATOL[group])
+    if group is SE2:
+        assert (tmp_path / "a.g2o").read_text() == (tmp_path / "b.g2o").read_text()
+
+
+@pytest.mark.parametrize("dialect", ["a", "b"])
+def test_sim3_round_trip_in_both_dialects(dialect, tmp_path):
+    graph = random_graph(Sim3, 9, 5, seed=32)
+    result = _round_trip(graph, tmp_path / "s.g2o", sim3_dialect=dialect)
+    assert result.sim3_dialect == dialect
+    assert result.tag_counts == {"VERTEX_SIM3:EXPMAP": 9, "EDGE_SIM3:EXPMAP": len(graph.edges)}
+    _assert_same_graph(result.graph, graph, atol=1e-10)
+
+
+def test_sim3_dialects_describe_the_same_graph(tmp_path):
+    graph = random_graph(Sim3, 6, 3, seed=33)
+    write_graph(graph, str(tmp_path / "a.g2o"), sim3_dialect="a")
+    write_graph(graph, str(tmp_path / "b.g2o"), sim3_dialect="b")
+    _assert_same_graph(
+        read_graph(str(tmp_path / "a.g2o")).graph, read_graph(str(tmp_path / "b.g2o")).graph, 1e-10
+    )
+
+
+def test_sim3_vertex_is_the_inverse_of_gs_world_to_camera_element(tmp_path):
+    """Dialect (a) stores Sᵢ (world → camera); our node is Xᵢ = Sᵢ⁻¹ (CONVENTIONS.md)."""
+    path = tmp_path / "v.g2o"
+    path.write_text(
+        "VERTEX_SIM3:EXPMAP 0 0 0 0 1 0 0 0 1\n"
+        "VERTEX_SIM3:EXPMAP 1 0 0 0.7071067811865476 0.7071067811865476 1 2 3 2\n"
+        + "EDGE_SIM3:EXPMAP 0 1 0 0 0 1 1 0 0 0.5 "
+        + " ".join(
+            ["1"]
+            + ["0"] * 6
+            + ["1"]
+            + ["0"] * 5
+            + ["1"]
+            + ["0"] * 4
+            + ["1", "0", "0", "0", "1", "0", "0", "1", "0", "1"]
+        )
+        + "\n"
+    )
+    graph = read_graph(str(path)).graph
+    s = Sim3.from_quaternion_translation_scale(
+        np.array([0, 0, 0.7071067811865476, 0.7071067811865476]), np.array([1.0, 2, 3]), 2.0
+    )
+    np.testing.assert_allclose(graph.values[1].as_matrix(), s.inverse().as_matrix(), atol=1e-12)
+    z = Sim3(np.eye(3), np.array([1.0, 0, 0]), 0.5)
+    np.testing.assert_allclose(
+        graph.edges.measurements[0].as_matrix(), z.inverse().as_matrix(), atol=1e-12
+    )
+
+
+@pytest.mark.parametrize("group", [SE2, SE3], ids=lambda g: g.__name__)
+def test_toro_round_trip(group, tmp_path):
+    graph = random_graph(group, 9, 5, seed=34)
+    graph.equivalences = np.array([[graph.node_ids[3], graph.node_ids[1]]])
+    first = _round_trip(graph, tmp_path / "a.graph")
+    assert first.format == "toro"
+    _assert_same_graph(first.graph, graph, atol=1e-12)
+    second = _round_trip(first.graph, tmp_path / "b.graph").graph
+    _assert_same_graph(second, first.graph, atol=ROUND_TRIP_ATOL[group])
+
+
+def test_fix_lines_are_honoured(tmp_path):
+    graph = random_graph(SE2, 10, 6, seed=35, noise=0.2)
+    path = tmp_path / "fix.g2o"
+    write_graph(graph, str(path))
+    path.write_text(path.read_text() + f"FIX {graph.node_ids[2]} {graph.node_ids[7]}\n")
+    read = read_graph(str(path)).graph
+    assert set(read.node_ids[read.fixed]) == {graph.node_ids[2], graph.node_ids[7]}
+    result = optimize(read)
+    np.testing.assert_array_equal(
+        result.values[read.fixed].as_matrix(), read.values[read.fixed].as_matrix()
+    )
+    assert result.summary.final_error < result.summary.initial_error
+    # The fixed nodes are the gauge: the lowest id is free.
+    assert not np.array_equal(result.values[0].as_matrix(), read.values[0].as_matrix())
+
+
+def test_g2o_rotation_information_option(tmp_path):
+    """g2o weighs the quaternion vector part (≈ φ/2): Λ_φφ = Λ_qq/4, Λ_ρφ = Λ_ρq/2."""
+    graph = random_graph(SE3, 4, 1, seed=36)
+    path = tmp_path / "g.g2o"
+    write_graph(graph, str(path))
+    as_is = read_graph(str(path)).graph.edges.information
+    faithful = read_graph(
+        str(path), ReadOptions(g2o_rotation_information=True)
+    ).graph.edges.information
+    np.testing.assert_allclose(faithful[:, :3, :3], as_is[:, :3, :3])
+    np.testing.assert_allclose(faithful[:, 3:, 3:], as_is[:, 3:, 3:] / 4)
+    np.testing.assert_allclose(faithful[:, :3, 3:], as_is[:, :3, 3:] / 2)
+    # Writing with the same option restores the file's numbers.
+    write_graph(
+        read_graph(str(path), ReadOptions(g2o_rotation_information=True)).graph,
+        str(tmp_path / "h.g2o"),
+        g2o_rotation_information=True,
+    )
+    np.testing.assert_allclose(
+        read_graph(str(tmp_path / "h.g2o")).graph.edges.information, as_is, rtol=1e-14
+    )
+
+
+def test_nodes_without_vertices_follow_the_odometry_chain(tmp_path):
+    """With no VERTEX lines, node k+1 = node k · Z(k → k+1), from the identity at the lowest id."""
+    graph = random_graph(SE2, 12, 6, seed=37)
+    text = "".join(line + "\n" for line in _edge_lines(graph))
+    path = tmp_path / "edges.g2o"
+    path.write_text(text)
+    result = read_graph(str(path))
+    np.testing.assert_array_equal(result.nodes_without_vertex, graph.node_ids)
+    expected = SE2.identity()
+    values = result.graph.values
+    np.testing.assert_allclose(values[0].as_matrix(), expected.as_matrix(), atol=1e-15)
+    chain = result.graph.edges
+    for k in range(graph.num_nodes - 1):
+        edge = np.flatnonzero((chain.i == k) & (chain.j == k + 1))[0]
+        expected = expected @ chain.measurements[edge]
+        np.testing.assert_allclose(values[k + 1].as_matrix(), expected.as_matrix(), atol=1e-12)
+
+
+def test_broken_chain_is_bridged_by_other_edges(tmp_path):
+    """Without the edge 3 → 4, node 4 is reached through a loop edge (or its inverse)."""
+    graph = PoseGraph(SE2)
+    truth = SE2.exp(np.random.default_rng(38).normal(size=(6, 3)))
+    graph.add_nodes(np.arange(6), truth)
+    i, j = np.array([0, 1, 2, 4, 5]), np.array([1, 2, 3, 5, 2])  # edge 5 → 2 bridges the gap
+    graph.add_edges(i, j, truth[i].between(truth[j]), np.eye(3))
+    path = tmp_path / "bridge.g2o"
+    path.write_text("".join(line + "\n" for line in _edge_lines(graph)))
+    values = read_graph(str(path)).graph.values
+    aligned = truth[0].inverse() @ truth  # the reader starts node 0 at the identity
+    np.testing.assert_allclose(values.as_matrix(), aligned.as_matrix(), atol=1e-12)
+
+
+def _edge_lines(graph):
+    from posegraph.io.writer import format_g2o
+
+    return [line for line in format_g2o(graph).splitlines() if line.startswith("EDGE")]
+
+
+def test_lenient_mode_skips_and_reports(tmp_path):
+    path = tmp_path / "mixed.g2o"
+    path.write_text(
+        "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nVERTEX_SE2 2 2 0 0\n"
+        "ROBOTLASER1 whatever 1 2 3\n"
+        "EDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\n"
+        "EDGE_SE2 1 2 1 0 nan 1 0 0 1 0 1\n"
+        "EDGE_SE2 1 2 1 0 0 1 0 0 1 0 1\n"
+    )
+    with pytest.raises(GraphFileError, match=r"mixed.g2o:4: unknown tag 'ROBOTLASER1'"):
+        read_graph(str(path))
+    result = read_graph(str(path), ReadOptions(lenient=True))
+    assert [line for line, _ in result.skipped] == [4, 6]
+    assert result.graph.num_edges == 2
+    assert result.tag_counts == {"VERTEX_SE2": 3, "EDGE_SE2": 2}
+
+
+def test_writes_are_atomic_and_leave_no_temporary_files(tmp_path):
+    graph = random_graph(SE3, 5, 2, seed=39)
+    target = tmp_path / "out.g2o"
+    target.write_text("previous content\n")
+    write_graph(graph, str(target))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.g2o"]
+    assert target.read_text().startswith("VERTEX_SE3:QUAT")
+    with pytest.raises(ValueError):
+        write_graph(random_graph(Sim3, 3, 0, seed=40), str(tmp_path / "x.graph"))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.g2o"]
+
+
+def test_reading_sphere2500_is_fast_enough_to_matter(shared_dataset):
+    """Functional check on the large benchmark file (its speed is in the benchmark script)."""
+    result = read_graph(str(shared_dataset("sphere2500.g2o")))
+    assert result.tag_counts == {"VERTEX_SE3:QUAT": 2500, "EDGE_SE3:QUAT": 4949}
+
+
+def test_w10000_with_equiv_lines(gtsam_dataset):
+    result = read_graph(str(gtsam_dataset("w10000.graph")))
+    assert result.format == "toro"
+    assert result.tag_counts == {"VERTEX2": 10000, "EDGE2": 64311, "EQUIV": 5875}
+    assert result.graph.equivalences.shape == (5875, 2)

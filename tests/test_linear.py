@@ -1,0 +1,84 @@
+"""The fixed-pattern normal equations against a dense assembly, for every backend."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from posegraph.factors import linearize_between, linearize_priors
+from posegraph.linear import NormalEquations
+from posegraph.sparse_cholesky import NotPositiveDefinite, available_backends
+
+from .conftest import POSE_GROUPS, random_graph
+
+
+def _dense_system(graph, held):
+    """H and g by stacking every edge's Jacobian rows into one dense J (no pattern involved)."""
+    d, n = graph.group.dof, graph.num_nodes
+    rows, residuals, weights = [], [], []
+    lin = linearize_between(graph.values, graph.edges)
+    for k in range(graph.num_edges):
+        row = np.zeros((d, n * d))
+        row[:, graph.edges.i[k] * d : (graph.edges.i[k] + 1) * d] = lin.jac_i[k]
+        row[:, graph.edges.j[k] * d : (graph.edges.j[k] + 1) * d] += lin.jac_j[k]
+        rows.append(row)
+        residuals.append(lin.residuals[k])
+        weights.append(graph.edges.information[k])
+    prior_lin = linearize_priors(graph.values, graph.priors)
+    for k in range(len(graph.priors)):
+        row = np.zeros((d, n * d))
+        row[:, graph.priors.i[k] * d : (graph.priors.i[k] + 1) * d] = prior_lin.jac_j[k]
+        rows.append(row)
+        residuals.append(prior_lin.residuals[k])
+        weights.append(graph.priors.information[k])
+    free = np.setdiff1d(np.arange(n), held)
+    columns = (free[:, None] * d + np.arange(d)).ravel()
+    hessian = np.zeros((columns.size, columns.size))
+    gradient = np.zeros(columns.size)
+    for row, r, omega in zip(rows, residuals, weights, strict=True):
+        jac = row[:, columns]
+        hessian += jac.T @ omega @ jac
+        gradient += jac.T @ omega @ r
+    return hessian, gradient
+
+
+@pytest.mark.parametrize("backend", available_backends())
+@pytest.mark.parametrize("group", POSE_GROUPS, ids=lambda g: g.__name__)
+def test_assembly_and_solve_match_dense(group, backend):
+    graph = random_graph(group, 12, 8, seed=5, priors=2)
+    held = np.array([0, 5])
+    system = NormalEquations(graph, held, backend)
+    lin = linearize_between(graph.values, graph.edges)
+    prior_lin = linearize_priors(graph.values, graph.priors)
+    data, gradient = system.assemble(
+        lin, graph.edges.information, prior_lin, graph.priors.information
+    )
+    expected_h, expected_g = _dense_system(graph, held)
+    np.testing.assert_allclose(system.matrix(data).toarray(), expected_h, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(gradient, expected_g, rtol=1e-12, atol=1e-9)
+    damping = np.full(system.size, 0.5)
+    system.factorize(data, damping)
+    step = system.solve(-gradient)
+    np.testing.assert_allclose(
+        step, np.linalg.solve(expected_h + 0.5 * np.eye(system.size), -expected_g), rtol=1e-8
+    )
+    assert system.scatter(step, graph.num_nodes)[held].sum() == 0
+
+
+@pytest.mark.parametrize("backend", available_backends())
+def test_indefinite_matrix_is_reported(backend):
+    graph = random_graph(POSE_GROUPS[0], 6, 2, seed=6)
+    system = NormalEquations(graph, graph.gauge_nodes(), backend)
+    lin = linearize_between(graph.values, graph.edges)
+    prior_lin = linearize_priors(graph.values, graph.priors)
+    data, _ = system.assemble(lin, graph.edges.information, prior_lin, graph.priors.information)
+    with pytest.raises(NotPositiveDefinite):
+        system.factorize(data, np.full(system.size, -1e9))
+
+
+def test_pattern_holds_one_block_per_node_and_edge_pair():
+    graph = random_graph(POSE_GROUPS[1], 10, 0, seed=7)  # a chain: 9 edges
+    system = NormalEquations(graph, np.array([0]))
+    free, d = 9, 6
+    chain_pairs = 8  # edges between two free nodes
+    assert system.nnz == (free + 2 * chain_pairs) * d * d

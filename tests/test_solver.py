@@ -1,0 +1,173 @@
+"""Gauss-Newton and Levenberg-Marquardt: convergence, gauge, termination, summary."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from posegraph.factors import linearize_between, linearize_priors
+from posegraph.graph import PoseGraph
+from posegraph.io import read_graph
+from posegraph.lie import SE2, SE3
+from posegraph.linear import NormalEquations
+from posegraph.solvers import SolverOptions, optimize
+from posegraph.sparse_cholesky import available_backends
+
+from .conftest import POSE_GROUPS, random_graph
+
+
+def _gradient_norm(graph, values, held):
+    system = NormalEquations(graph, held, "scipy")
+    lin = linearize_between(values, graph.edges)
+    prior_lin = linearize_priors(values, graph.priors)
+    _, gradient = system.assemble(lin, graph.edges.information, prior_lin, graph.priors.information)
+    return np.abs(gradient).max()
+
+
+@pytest.mark.parametrize("method", ["lm", "gn"])
+@pytest.mark.parametrize("group", POSE_GROUPS, ids=lambda g: g.__name__)
+def test_converges_to_a_stationary_point(group, method):
+    graph = random_graph(group, 30, 20, seed=41, noise=0.1, priors=1)
+    result = optimize(graph, SolverOptions(method=method, relative_decrease=1e-14))
+    summary = result.summary
+    assert summary.converged, summary.termination
+    assert summary.final_error < summary.initial_error
+    held = graph.gauge_nodes()
+    initial_gradient = _gradient_norm(graph, graph.values, held)
+    assert _gradient_norm(graph, result.values, held) < 1e-6 * initial_gradient
+    errors = [r.error for r in summary.iterations]
+    assert all(b <= a for a, b in zip(errors, errors[1:], strict=False))
+
+
+def test_gauss_newton_and_levenberg_marquardt_agree():
+    graph = random_graph(SE3, 25, 15, seed=42, noise=0.05)
+    tight = dict(relative_decrease=1e-14)
+    lm = optimize(graph, SolverOptions(method="lm", **tight))
+    gn = optimize(graph, SolverOptions(method="gn", **tight))
+    np.testing.assert_allclose(lm.values.local(gn.values), 0.0, atol=1e-7)
+
+
+@pytest.mark.parametrize("backend", available_backends())
+def test_backends_and_damping_reach_the_same_optimum(backend):
+    graph = random_graph(SE2, 40, 30, seed=43, noise=0.1)
+    reference = optimize(graph, SolverOptions(relative_decrease=1e-14)).summary.final_error
+    for damping in ("diagonal", "identity"):
+        options = SolverOptions(linear_solver=backend, damping=damping, relative_decrease=1e-14)
+        result = optimize(graph, options)
+        assert result.summary.linear_solver == backend
+        assert result.summary.final_error == pytest.approx(reference, rel=1e-9)
+
+
+def test_fixed_and_gauge_nodes_do_not_move():
+    graph = random_graph(SE3, 20, 10, seed=44, noise=0.1)
+    result = optimize(graph)
+    assert graph.gauge_nodes().tolist() == [0]
+    assert result.values[0].as_matrix().tobytes() == graph.values[0].as_matrix().tobytes()
+    assert result.summary.num_variables == 19 * 6
+    graph.fix(graph.node_ids[[3, 8]])
+    result = optimize(graph)
+    assert graph.gauge_nodes().tolist() == [3, 8]
+    np.testing.assert_array_equal(
+        result.values[[3, 8]].as_matrix(), graph.values[[3, 8]].as_matrix()
+    )
+
+
+def test_a_prior_replaces_the_gauge():
+    graph = random_graph(SE2, 10, 4, seed=45, priors=1)
+    assert graph.gauge_nodes().size == 0
+    assert optimize(graph).summary.num_variables == 10 * 3
+
+
+def test_each_connected_component_gets_its_own_gauge():
+    a, b = random_graph(SE2, 8, 3, seed=46), random_graph(SE2, 6, 2, seed=47)
+    graph = PoseGraph(SE2)
+    graph.add_nodes(a.node_ids, a.values)
+    graph.add_nodes(b.node_ids + 1000, b.values)
+    graph.add_edges(
+        a.node_ids[a.edges.i], a.node_ids[a.edges.j], a.edges.measurements, a.edges.information
+    )
+    graph.add_edges(
+        b.node_ids[b.edges.i] + 1000,
+        b.node_ids[b.edges.j] + 1000,
+        b.edges.measurements,
+        b.edges.information,
+    )
+    assert graph.node_ids[graph.gauge_nodes()].tolist() == [a.node_ids[0], b.node_ids[0] + 1000]
+    result = optimize(graph)
+    expected = optimize(a).summary.final_error + optimize(b).summary.final_error
+    assert result.summary.final_error == pytest.approx(expected, rel=1e-9)
+
+
+def test_callback_sees_every_iteration_and_can_stop_the_run():
+    graph = random_graph(SE2, 30, 20, seed=48, noise=0.2)
+    seen = []
+    optimize(graph, callback=seen.append)
+    assert [r.iteration for r in seen] == list(range(1, len(seen) + 1))
+    stopped = optimize(graph, callback=lambda record: record.iteration == 2)
+    assert stopped.summary.termination == "stopped by callback"
+    assert stopped.summary.num_iterations == 2
+
+
+def test_limits_stop_the_run():
+    graph = random_graph(SE3, 30, 20, seed=49, noise=0.2)
+    assert (
+        optimize(graph, SolverOptions(max_iterations=1)).summary.termination
+        == "maximum iterations reached"
+    )
+    timed = optimize(graph, SolverOptions(time_limit=0.0))
+    assert timed.summary.termination == "time limit reached"
+    assert timed.summary.final_error == timed.summary.initial_error
+    untouched = optimize(graph, SolverOptions(max_iterations=0))
+    assert untouched.summary.num_iterations == 0
+    assert untouched.values is graph.values
+
+
+def test_a_step_that_raises_the_error_is_rejected(shared_dataset):
+    """On MIT, from the file's values, the first Gauss-Newton step overshoots: GN stops and
+    keeps the initial values; LM rejects such steps, raises λ and goes on."""
+    graph = read_graph(shared_dataset("MIT.g2o")).graph
+    gn = optimize(graph, SolverOptions(method="gn"))
+    assert gn.summary.termination == "step raised the error (Gauss-Newton)"
+    assert gn.summary.final_error == gn.summary.initial_error
+    lm = optimize(graph)
+    assert any(not r.accepted for r in lm.summary.iterations)
+    assert lm.summary.converged
+
+
+def test_non_finite_steps_are_rejected(monkeypatch):
+    """A step with NaNs (a failed solve) is rejected; LM raises λ and still converges."""
+    graph = random_graph(SE2, 12, 6, seed=50, noise=0.2)
+    real_solve = NormalEquations.solve
+    calls = []
+
+    def first_solve_fails(self, rhs):
+        calls.append(1)
+        step = real_solve(self, rhs)
+        return np.full_like(step, np.nan) if len(calls) == 1 else step
+
+    monkeypatch.setattr(NormalEquations, "solve", first_solve_fails)
+    result = optimize(graph)
+    first = result.summary.iterations[0]
+    assert not first.accepted and first.error == result.summary.initial_error
+    assert first.damping == 2 * SolverOptions().initial_damping  # the rejection doubled λ
+    assert np.isfinite(result.values.as_matrix()).all()
+    assert result.summary.converged
+
+
+def test_summary_reports_errors_and_phases():
+    graph = random_graph(SE2, 20, 10, seed=51, noise=0.2)
+    summary = optimize(graph).summary
+    assert summary.initial_chi2 == 2 * summary.initial_error
+    assert summary.final_chi2 == 2 * summary.final_error
+    assert set(summary.phase_times) == {"linearize", "assemble", "factorize", "solve", "other"}
+    assert sum(summary.phase_times.values()) == pytest.approx(summary.total_time, rel=0.05)
+    record = summary.as_dict()
+    assert record["iterations"] == summary.num_iterations
+    assert len(record["history"]) == summary.num_iterations
+
+
+def test_invalid_options_are_refused():
+    with pytest.raises(ValueError, match="method"):
+        SolverOptions(method="dogleg")
+    with pytest.raises(ValueError, match="damping"):
+        SolverOptions(damping="sometimes")
