@@ -1,22 +1,148 @@
-"""Entry point of the ``posegraph`` command."""
+"""Entry point of the ``posegraph`` command: argument parsing and error handling.
+
+Exit codes: 0 success; 1 ran but did not converge (or was interrupted); 2 bad input or usage;
+3 internal error. Bad input is reported as one line naming ``file:line``; ``--debug`` shows
+the traceback instead.
+"""
 
 from __future__ import annotations
 
 import argparse
 import sys
+import traceback
 
 import posegraph
+from posegraph.initialization import INITIALIZERS
+
+from . import commands
+from .errors import EXIT_BAD_INPUT, UsageError, report
+
+EXIT_INTERNAL = 3
+
+EXAMPLES = {
+    "optimize": """examples:
+  posegraph optimize datasets/sphere_small.g2o -o optimised.g2o --plot optimised.png
+  posegraph optimize city.graph -o city.g2o --init odometry --max-iterations 50 --json
+  posegraph optimize garage.g2o -o out.g2o --fix 0 17 --g2o-rotation-information""",
+    "info": """examples:
+  posegraph info datasets/manhattan_small.g2o
+  posegraph info broken.g2o --lenient --json""",
+    "convert": """examples:
+  posegraph convert intel.g2o intel.graph          # g2o -> TORO
+  posegraph convert sphere.g2o sphere.tum          # poses as TUM: id tx ty tz qx qy qz qw
+  posegraph convert sphere.g2o poses.txt --to kitti""",
+    "plot": """examples:
+  posegraph plot before.g2o after.g2o -o overlay.png
+  posegraph plot garage.g2o -o top.png --view top""",
+    "eval": """examples:
+  posegraph eval optimised.g2o groundtruth.tum
+  posegraph eval estimate.tum groundtruth.tum --align sim3 --plot ate.png --json""",
+    "bench": """examples:
+  posegraph bench --graphs sphere2500 parking-garage --repeats 3""",
+}
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="posegraph", description=posegraph.__doc__)
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="posegraph",
+        description="Pose-graph optimisation on Lie groups (SE2, SE3, Sim3).",
+        epilog="Run 'posegraph COMMAND --help' for a command's options and examples.",
+    )
     parser.add_argument("--version", action="version", version=f"posegraph {posegraph.__version__}")
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument(
+        "--json", action="store_true", help="print one JSON document (README: schema)"
+    )
+    common.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    common.add_argument("--debug", action="store_true", help="show tracebacks")
+    reading = argparse.ArgumentParser(add_help=False)
+    reading.add_argument(
+        "--lenient", action="store_true", help="skip bad lines instead of stopping"
+    )
+    reading.add_argument(
+        "--g2o-rotation-information",
+        action="store_true",
+        help="weigh SE3 rotation information as g2o does (Λ_φφ = Λ_qq/4)",
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    def command(name: str, help_text: str, parents) -> argparse.ArgumentParser:
+        return sub.add_parser(
+            name,
+            help=help_text,
+            description=help_text,
+            parents=parents,
+            epilog=EXAMPLES[name],
+            formatter_class=argparse.RawDescriptionHelpFormatter,
+        )
+
+    opt = command("optimize", "optimise a g2o or TORO pose graph", [common, reading])
+    opt.add_argument("input", help="g2o or TORO file")
+    opt.add_argument("-o", "--output", help="write the optimised graph here (format by suffix)")
+    opt.add_argument("--solver", choices=["lm", "gn"], default="lm", help="default: lm")
+    opt.add_argument("--init", choices=INITIALIZERS, default="file", help="default: file")
+    opt.add_argument("--max-iterations", type=int, default=100, help="default: 100")
+    opt.add_argument("--time-limit", type=float, help="seconds")
+    opt.add_argument(
+        "--fix", type=int, nargs="+", metavar="ID", default=[], help="hold these nodes"
+    )
+    opt.add_argument("--plot", metavar="FIG.png", help="before/after figure")
+    opt.add_argument("--overwrite", action="store_true", help="allow -o to be the input file")
+
+    info = command(
+        "info", "inspect a graph: counts, gauge, information checks, problems", [common, reading]
+    )
+    info.add_argument("input")
+
+    conv = command(
+        "convert", "convert g2o <-> TORO, or export poses as TUM or KITTI", [common, reading]
+    )
+    conv.add_argument("input")
+    conv.add_argument("output")
+    conv.add_argument("--to", choices=["g2o", "toro", "tum", "kitti"], help="default: by suffix")
+    conv.add_argument("--sim3-dialect", choices=["a", "b"], default="a", help="for Sim3 g2o output")
+    conv.add_argument("--overwrite", action="store_true", help="allow the output to be the input")
+
+    plot = command("plot", "draw one graph or overlay several", [common, reading])
+    plot.add_argument("inputs", nargs="+", metavar="input")
+    plot.add_argument("-o", "--output", required=True, metavar="FIG.png")
+    plot.add_argument("--view", choices=["auto", "top", "3d"], default="auto")
+    plot.add_argument("--title")
+
+    ev = command("eval", "ATE and RPE of an estimate against ground truth", [common, reading])
+    ev.add_argument("estimate", help="g2o, TORO, TUM or KITTI")
+    ev.add_argument("ground_truth", help="g2o, TORO, TUM or KITTI")
+    ev.add_argument("--align", choices=["se3", "sim3", "none"], default="se3", help="default: se3")
+    ev.add_argument("--delta", type=int, default=1, help="RPE step in poses (default 1)")
+    ev.add_argument("--plot", metavar="FIG.png")
+
+    bench = command("bench", "time posegraph against gtsam on the benchmark graphs", [common])
+    bench.add_argument("--repeats", type=int, default=3)
+    bench.add_argument("--graphs", nargs="*", metavar="NAME", help="default: all found")
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
-    build_parser().parse_args(argv)
-    return 0
+    args = _parser().parse_args(argv)
+    handler = getattr(commands, args.command.replace("-", "_"))
+    try:
+        return handler(args)
+    except (posegraph.GraphFileError, UsageError, ValueError, OSError) as error:
+        if args.debug:
+            traceback.print_exc()
+        report(str(error) if not isinstance(error, OSError) else _os_message(error))
+        return EXIT_BAD_INPUT
+    except Exception as error:  # noqa: BLE001 - the one place that turns crashes into a line
+        if args.debug:
+            traceback.print_exc()
+        else:
+            report(f"internal error: {type(error).__name__}: {error} (rerun with --debug)")
+        return EXIT_INTERNAL
+
+
+def _os_message(error: OSError) -> str:
+    where = f"{error.filename}: " if error.filename else ""
+    return f"{where}{error.strerror or error}"
 
 
 if __name__ == "__main__":

@@ -2,7 +2,29 @@
 
 from importlib.metadata import PackageNotFoundError, version
 
+from .api import optimize
+from .graph import PoseGraph
+from .io import GraphFileError, ReadOptions, read_graph, write_graph
+from .lie import SE2, SE3, SO2, SO3, Sim3
+from .solvers import Result, SolverOptions
+
 try:
     __version__ = version("posegraph")
 except PackageNotFoundError:  # running from a source tree that is not installed
     __version__ = "0+unknown"
+
+__all__ = [
+    "SE2",
+    "SE3",
+    "SO2",
+    "SO3",
+    "GraphFileError",
+    "PoseGraph",
+    "ReadOptions",
+    "Result",
+    "Sim3",
+    "SolverOptions",
+    "optimize",
+    "read_graph",
+    "write_graph",
+]

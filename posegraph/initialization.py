@@ -18,7 +18,26 @@ from .lie import LieGroup
 _ANCHOR_WEIGHT = 1e-9  # known values hang off the virtual root first
 _ODOMETRY_WEIGHT = 1.0
 _OTHER_WEIGHT = 2.0
-_COMPONENT_ROOT_WEIGHT = 4.0  # a component with no known value starts at the identity
+_COMPONENT_ROOT_WEIGHT = 4.0  # above every edge weight: used only where no edge reaches
+
+INITIALIZERS = ("file", "odometry", "spanning-tree")
+"""Names accepted by ``initialize``."""
+
+
+def initialize(graph: PoseGraph, method: str) -> LieGroup:
+    """Initial values by ``method``: "file" (the graph's values), "odometry" (compose the chain
+    i → i+1, bridging breaks through other edges) or "spanning-tree" (compose along the most
+    informative edges). Held nodes (fixed or priors' anchors) keep their values."""
+    if method == "file":
+        return graph.values
+    held = np.zeros(graph.num_nodes, dtype=bool)
+    held[graph.fixed] = True
+    prefer = {"odometry": "odometry", "spanning-tree": "information"}.get(method)
+    if prefer is None:
+        raise ValueError(
+            f"unknown initialisation {method!r}; choose from {', '.join(INITIALIZERS)}"
+        )
+    return spanning_tree_values(graph, known=held, prefer=prefer)
 
 
 def odometry_mask(graph: PoseGraph) -> np.ndarray:
@@ -27,8 +46,25 @@ def odometry_mask(graph: PoseGraph) -> np.ndarray:
     return np.abs(graph.edges.j - graph.edges.i) == 1
 
 
-def spanning_tree_values(graph: PoseGraph, known: np.ndarray | None = None) -> LieGroup:
-    """Values from composing measurements along a spanning tree preferring odometry edges.
+def edge_weights(graph: PoseGraph, prefer: str) -> np.ndarray:
+    """Spanning-tree weights in [1, 2] (lower is preferred).
+
+    "odometry": consecutive-node edges first. "information": the most informative edges
+    first, ranked by log det Ω (any information matrix, full or diagonal).
+    """
+    if prefer == "odometry":
+        return np.where(odometry_mask(graph), _ODOMETRY_WEIGHT, _OTHER_WEIGHT)
+    if prefer == "information":
+        _, log_det = np.linalg.slogdet(graph.edges.information)
+        rank = np.argsort(np.argsort(-log_det, kind="stable"), kind="stable")
+        return 1.0 + rank / max(rank.size, 1)
+    raise ValueError(f"prefer is 'odometry' or 'information', not {prefer!r}")
+
+
+def spanning_tree_values(
+    graph: PoseGraph, known: np.ndarray | None = None, prefer: str = "odometry"
+) -> LieGroup:
+    """Values from composing measurements along a minimum spanning tree (``edge_weights``).
 
     ``known`` marks nodes whose current values are kept; each connected component without a
     known node starts at the identity at its lowest id.
@@ -37,7 +73,7 @@ def spanning_tree_values(graph: PoseGraph, known: np.ndarray | None = None) -> L
     group = graph.group
     known = np.zeros(n, dtype=bool) if known is None else np.asarray(known, dtype=bool)
     i, j = graph.edges.i, graph.edges.j
-    weights = np.where(odometry_mask(graph), _ODOMETRY_WEIGHT, _OTHER_WEIGHT)
+    weights = edge_weights(graph, prefer)
 
     labels = graph.components()
     order = np.lexsort((graph.node_ids, labels))

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from posegraph_datasets.paths import gtsam_data_dir, shared_datasets_dir
 
-from posegraph.datasets_paths import gtsam_data_dir, shared_datasets_dir
 from posegraph.graph import PoseGraph
 from posegraph.lie import SE2, SE3, LieGroup, Sim3
 

@@ -39,6 +39,9 @@ class Summary:
     """Size of the linear system (free nodes × dof)."""
     reused: list[str] = dataclasses.field(default_factory=list)
     """What a warm start reused (for example "sparsity pattern", "symbolic factorization")."""
+    initialization: str = "file"
+    """How the starting values were made (``posegraph.initialization.INITIALIZERS``)."""
+    initialization_time: float = 0.0
 
     @property
     def initial_chi2(self) -> float:
@@ -68,6 +71,8 @@ class Summary:
             "total_time": self.total_time,
             "num_variables": self.num_variables,
             "reused": list(self.reused),
+            "initialization": self.initialization,
+            "initialization_time": self.initialization_time,
             "history": [dataclasses.asdict(r) for r in self.iterations],
         }
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from posegraph_datasets.paths import BEST_KNOWN_ERROR
 
-from posegraph.datasets_paths import BEST_KNOWN_ERROR
 from posegraph.factors import linearize_between, linearize_priors
 from posegraph.io import read_graph
 from posegraph.lie import SE2, SE3, Sim3

@@ -38,7 +38,7 @@ def shared_datasets_dir() -> Path | None:
     candidates = []
     if os.environ.get(SHARED_DATASETS_ENV):
         candidates.append(Path(os.environ[SHARED_DATASETS_ENV]))
-    project_root = Path(__file__).resolve().parent.parent
+    project_root = Path(__file__).resolve().parent.parent  # the checkout (editable install)
     candidates += [
         project_root.parent / "shared" / "datasets",
         Path.cwd().parent / "shared" / "datasets",

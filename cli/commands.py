@@ -1,0 +1,163 @@
+"""One handler per subcommand; each reads its inputs, calls one library function, and prints."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+
+import posegraph
+from posegraph.conversion import convert as convert_graph
+from posegraph.conversion import load_trajectory
+from posegraph.doctor import diagnose
+from posegraph.evaluation import evaluate
+from posegraph.io import ReadOptions, read_graph
+from posegraph.solvers import SolverOptions
+
+from .errors import EXIT_NOT_CONVERGED, EXIT_OK, UsageError
+from .progress import Progress
+from .summary import format_diagnosis, format_evaluation, format_summary
+
+
+def _options(args: argparse.Namespace) -> ReadOptions:
+    return ReadOptions(lenient=args.lenient, g2o_rotation_information=args.g2o_rotation_information)
+
+
+def _emit(args: argparse.Namespace, record: dict, text: str) -> None:
+    if args.json:
+        print(json.dumps(record, indent=2))
+    elif not args.quiet:
+        print(text)
+
+
+def _refuse_to_overwrite(source: str, target: str | None, allowed: bool) -> None:
+    if target and not allowed and os.path.exists(target) and os.path.samefile(source, target):
+        raise UsageError(
+            f"refusing to overwrite the input file {source}; pass --overwrite to allow it"
+        )
+
+
+def optimize(args: argparse.Namespace) -> int:
+    _refuse_to_overwrite(args.input, args.output, args.overwrite)
+    read = read_graph(args.input, _options(args))
+    graph = read.graph
+    if args.fix:
+        try:
+            graph.fix(args.fix)
+        except KeyError as error:
+            raise UsageError(f"--fix: {error.args[0]}") from None
+    before = graph.copy()
+    options = SolverOptions(
+        method=args.solver, max_iterations=args.max_iterations, time_limit=args.time_limit
+    )
+    with Progress(enabled=not (args.quiet or args.json)) as progress:
+        result = posegraph.optimize(graph, init=args.init, options=options, callback=progress)
+    summary = result.summary
+    if progress.interrupted:
+        summary.termination = "interrupted (Ctrl-C)"
+        summary.converged = False
+    graph.set_values(result.values)
+    if args.output:
+        convert_graph(
+            graph,
+            args.output,
+            g2o_rotation_information=args.g2o_rotation_information,
+            sim3_dialect=read.sim3_dialect or "a",
+        )
+    if args.plot:
+        from posegraph.plotting import plot_graphs
+
+        plot_graphs(
+            [("initial", before), ("optimised", graph)],
+            args.plot,
+            title=os.path.basename(args.input),
+        )
+    record = {
+        "command": "optimize",
+        "input": args.input,
+        "output": args.output,
+        "plot": args.plot,
+        "group": graph.group.__name__,
+        "nodes": graph.num_nodes,
+        "edges": graph.num_edges,
+        "summary": summary.as_dict(),
+    }
+    _emit(args, record, format_summary(args.input, graph, summary, args.output, args.plot))
+    return EXIT_OK if summary.converged else EXIT_NOT_CONVERGED
+
+
+def info(args: argparse.Namespace) -> int:
+    diagnosis = diagnose(read_graph(args.input, _options(args)))
+    _emit(args, {"command": "info", **diagnosis.as_dict()}, format_diagnosis(diagnosis))
+    return EXIT_OK
+
+
+def convert(args: argparse.Namespace) -> int:
+    _refuse_to_overwrite(args.input, args.output, args.overwrite)
+    graph = read_graph(args.input, _options(args)).graph
+    written = convert_graph(
+        graph, args.output, args.to, args.sim3_dialect, args.g2o_rotation_information
+    )
+    record = {
+        "command": "convert",
+        "input": args.input,
+        "output": args.output,
+        "format": written,
+        "nodes": graph.num_nodes,
+        "edges": graph.num_edges,
+    }
+    _emit(args, record, f"wrote {args.output} ({written}, {graph.num_nodes} poses)")
+    return EXIT_OK
+
+
+def plot(args: argparse.Namespace) -> int:
+    from posegraph.plotting import plot_graphs
+
+    graphs = [(os.path.basename(p), read_graph(p, _options(args)).graph) for p in args.inputs]
+    plot_graphs(graphs, args.output, title=args.title, view=args.view)
+    record = {"command": "plot", "inputs": args.inputs, "output": args.output}
+    _emit(args, record, f"wrote {args.output}")
+    return EXIT_OK
+
+
+def eval(args: argparse.Namespace) -> int:  # noqa: A001 - the subcommand's name
+    estimate = load_trajectory(args.estimate, _options(args))
+    truth = load_trajectory(args.ground_truth, _options(args))
+    evaluation = evaluate(estimate, truth, args.align, args.delta)
+    if args.plot:
+        from posegraph.plotting import plot_trajectories
+
+        plot_trajectories(
+            [
+                ("ground truth", truth.positions),
+                (f"estimate ({args.align}-aligned)", evaluation.aligned_estimate.translation),
+            ],
+            args.plot,
+            title=f"ATE RMSE {evaluation.ate.rmse:.4g}",
+        )
+    record = {
+        "command": "eval",
+        "estimate": args.estimate,
+        "ground_truth": args.ground_truth,
+        "plot": args.plot,
+        **evaluation.as_dict(),
+    }
+    _emit(args, record, format_evaluation(evaluation))
+    return EXIT_OK
+
+
+def bench(args: argparse.Namespace) -> int:
+    from posegraph.benchmarks.optimizer import benchmark_files, run
+
+    files = benchmark_files()
+    if args.graphs:
+        files = [f for f in files if f.stem in args.graphs]
+    if not files:
+        raise UsageError("no benchmark graphs found (../shared/datasets or gtsam's Data/)")
+    table = run(files, args.repeats, echo=not (args.quiet or args.json))
+    if args.json:
+        print(json.dumps({"command": "bench", "table": table}, indent=2))
+    elif not args.quiet:
+        sys.stdout.flush()
+    return EXIT_OK

@@ -1,0 +1,17 @@
+"""Exit codes and the single-line error report of the ``posegraph`` command."""
+
+from __future__ import annotations
+
+import sys
+
+EXIT_OK = 0
+EXIT_NOT_CONVERGED = 1
+EXIT_BAD_INPUT = 2
+
+
+class UsageError(Exception):
+    """Bad arguments or a refused action; reported as one line, exit code 2."""
+
+
+def report(message: str) -> None:
+    print(f"posegraph: error: {message}", file=sys.stderr)

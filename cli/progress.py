@@ -1,0 +1,45 @@
+"""Live optimisation progress on a terminal, and the Ctrl-C handling that stops cleanly."""
+
+from __future__ import annotations
+
+import signal
+import sys
+
+from posegraph.solvers import IterationRecord
+
+
+class Progress:
+    """Prints one line per iteration to stderr when it is a terminal (never when piped)."""
+
+    def __init__(self, enabled: bool) -> None:
+        self.enabled = enabled and sys.stderr.isatty()
+        self.interrupted = False
+        self._previous_handler = None
+
+    def __enter__(self) -> Progress:
+        self._previous_handler = signal.signal(signal.SIGINT, self._on_interrupt)
+        if self.enabled:
+            print(
+                f"{'iter':>5} {'error':>16} {'lambda':>9} {'step':>9} {'time':>8}", file=sys.stderr
+            )
+        return self
+
+    def __exit__(self, *exc) -> None:
+        signal.signal(signal.SIGINT, self._previous_handler)
+
+    def _on_interrupt(self, signum, frame) -> None:
+        self.interrupted = True
+        if self.enabled:
+            print("interrupted: stopping after this iteration …", file=sys.stderr)
+
+    def __call__(self, record: IterationRecord) -> bool:
+        """The solver callback: print, and stop the run once Ctrl-C was pressed."""
+        if self.enabled:
+            mark = "" if record.accepted else "  (rejected)"
+            print(
+                f"{record.iteration:>5} {record.error:>16.10g} {record.damping:>9.2e} "
+                f"{record.step_norm:>9.2e} {record.elapsed:>7.2f}s{mark}",
+                file=sys.stderr,
+                flush=True,
+            )
+        return self.interrupted

@@ -1,0 +1,166 @@
+"""JSON Schemas (draft 2020-12) of the documents ``--json`` prints; the README shows them."""
+
+from __future__ import annotations
+
+_NUMBER = {"type": "number"}
+_STATS = {
+    "type": "object",
+    "required": ["rmse", "mean", "median", "max", "count"],
+    "properties": {
+        "rmse": _NUMBER,
+        "mean": _NUMBER,
+        "median": _NUMBER,
+        "max": _NUMBER,
+        "count": {"type": "integer"},
+    },
+}
+_PATH_OR_NULL = {"type": ["string", "null"]}
+
+SUMMARY = {
+    "type": "object",
+    "required": [
+        "method",
+        "linear_solver",
+        "initial_error",
+        "final_error",
+        "initial_chi2",
+        "final_chi2",
+        "iterations",
+        "termination",
+        "converged",
+        "phase_times",
+        "total_time",
+        "num_variables",
+        "reused",
+        "initialization",
+        "initialization_time",
+        "history",
+    ],
+    "properties": {
+        "method": {"enum": ["lm", "gn"]},
+        "linear_solver": {"enum": ["cholmod", "scipy"]},
+        "initial_error": _NUMBER,
+        "final_error": _NUMBER,
+        "initial_chi2": _NUMBER,
+        "final_chi2": _NUMBER,
+        "iterations": {"type": "integer", "minimum": 0},
+        "termination": {"type": "string"},
+        "converged": {"type": "boolean"},
+        "phase_times": {
+            "type": "object",
+            "required": ["linearize", "assemble", "factorize", "solve", "other"],
+            "additionalProperties": _NUMBER,
+        },
+        "total_time": _NUMBER,
+        "num_variables": {"type": "integer"},
+        "reused": {"type": "array", "items": {"type": "string"}},
+        "initialization": {"type": "string"},
+        "initialization_time": _NUMBER,
+        "history": {
+            "type": "array",
+            "items": {
+                "type": "object",
+                "required": ["iteration", "error", "damping", "step_norm", "accepted", "elapsed"],
+                "properties": {
+                    "iteration": {"type": "integer"},
+                    "error": _NUMBER,
+                    "damping": _NUMBER,
+                    "step_norm": _NUMBER,
+                    "accepted": {"type": "boolean"},
+                    "elapsed": _NUMBER,
+                },
+            },
+        },
+    },
+}
+
+SCHEMAS = {
+    "optimize": {
+        "type": "object",
+        "required": ["command", "input", "output", "plot", "group", "nodes", "edges", "summary"],
+        "properties": {
+            "command": {"const": "optimize"},
+            "input": {"type": "string"},
+            "output": _PATH_OR_NULL,
+            "plot": _PATH_OR_NULL,
+            "group": {"enum": ["SE2", "SE3", "Sim3"]},
+            "nodes": {"type": "integer"},
+            "edges": {"type": "integer"},
+            "summary": SUMMARY,
+        },
+    },
+    "info": {
+        "type": "object",
+        "required": [
+            "command",
+            "path",
+            "file_format",
+            "group",
+            "tag_counts",
+            "nodes",
+            "edges",
+            "priors",
+            "components",
+            "gauge",
+            "condition_numbers",
+            "initial_error",
+            "initial_chi2",
+            "problems",
+        ],
+        "properties": {
+            "command": {"const": "info"},
+            "file_format": {"enum": ["g2o", "toro"]},
+            "tag_counts": {"type": "object", "additionalProperties": {"type": "integer"}},
+            "components": {"type": "array", "items": {"type": "integer"}},
+            "condition_numbers": {"type": "object", "additionalProperties": _NUMBER},
+            "problems": {
+                "type": "array",
+                "items": {
+                    "type": "object",
+                    "required": ["what", "suggestion"],
+                    "properties": {"what": {"type": "string"}, "suggestion": {"type": "string"}},
+                },
+            },
+        },
+    },
+    "convert": {
+        "type": "object",
+        "required": ["command", "input", "output", "format", "nodes", "edges"],
+        "properties": {
+            "command": {"const": "convert"},
+            "format": {"enum": ["g2o", "toro", "tum", "kitti"]},
+        },
+    },
+    "plot": {
+        "type": "object",
+        "required": ["command", "inputs", "output"],
+        "properties": {
+            "command": {"const": "plot"},
+            "inputs": {"type": "array", "items": {"type": "string"}},
+        },
+    },
+    "eval": {
+        "type": "object",
+        "required": [
+            "command",
+            "estimate",
+            "ground_truth",
+            "plot",
+            "alignment",
+            "scale",
+            "matched_poses",
+            "ate",
+            "rpe_translation",
+            "rpe_rotation_deg",
+        ],
+        "properties": {
+            "command": {"const": "eval"},
+            "alignment": {"enum": ["se3", "sim3", "none"]},
+            "scale": _NUMBER,
+            "matched_poses": {"type": "integer"},
+            "ate": _STATS,
+            "rpe_translation": _STATS,
+            "rpe_rotation_deg": _STATS,
+        },
+    },
+}

@@ -1,0 +1,71 @@
+"""Human-readable reports: the optimisation summary, the doctor's diagnosis, the evaluation."""
+
+from __future__ import annotations
+
+from posegraph.doctor import Diagnosis
+from posegraph.evaluation import Evaluation
+from posegraph.graph import PoseGraph
+from posegraph.solvers import Summary
+
+
+def format_summary(
+    source: str, graph: PoseGraph, summary: Summary, output: str | None, plot: str | None
+) -> str:
+    phases = summary.phase_times
+    lines = [
+        f"{source}: {graph.group.__name__}, {graph.num_nodes} nodes, {graph.num_edges} edges",
+        f"  initialisation  {summary.initialization} ({summary.initialization_time:.3f} s)",
+        f"  error ½Σrᵀ Ω r  {summary.initial_error:.10g} -> {summary.final_error:.10g}",
+        f"  chi2  Σrᵀ Ω r   {summary.initial_chi2:.10g} -> {summary.final_chi2:.10g}",
+        f"  iterations      {summary.num_iterations} ({summary.method}, {summary.linear_solver})",
+        f"  termination     {summary.termination}{'' if summary.converged else ' (not converged)'}",
+        f"  time            {summary.total_time:.3f} s: "
+        + ", ".join(f"{name} {seconds:.3f}" for name, seconds in phases.items()),
+    ]
+    if output:
+        lines.append(f"  wrote           {output}")
+    if plot:
+        lines.append(f"  plotted         {plot}")
+    return "\n".join(lines)
+
+
+def format_diagnosis(d: Diagnosis) -> str:
+    counts = ", ".join(f"{tag} {count}" for tag, count in d.tag_counts.items())
+    lines = [
+        f"{d.path} ({d.file_format}): {d.group} pose graph",
+        f"  lines           {counts}",
+        f"  graph           {d.nodes} nodes, {d.edges} edges, {d.priors} priors",
+        f"  components      {len(d.components)} (sizes {', '.join(map(str, d.components[:5]))})",
+        f"  gauge           {d.gauge}",
+    ]
+    if d.condition_numbers:
+        c = d.condition_numbers
+        lines.append(
+            f"  information     SPD; condition number min {c['min']:.3g}, median {c['median']:.3g}, max {c['max']:.3g}"
+        )
+    lines.append(f"  initial error   {d.initial_error:.10g} (½Σrᵀ Ω r), chi2 {d.initial_chi2:.10g}")
+    if d.problems:
+        lines.append(f"  problems        {len(d.problems)}")
+        for problem in d.problems:
+            lines.append(f"    - {problem.what}")
+            lines.append(f"      → {problem.suggestion}")
+    else:
+        lines.append("  problems        none found")
+    return "\n".join(lines)
+
+
+def format_evaluation(e: Evaluation) -> str:
+    def row(name: str, stats, unit: str) -> str:
+        return (
+            f"  {name:<16} rmse {stats.rmse:.6g}{unit}  mean {stats.mean:.6g}  "
+            f"median {stats.median:.6g}  max {stats.max:.6g}"
+        )
+
+    return "\n".join(
+        [
+            f"matched {e.matched} poses; alignment {e.alignment} (scale {float(e.alignment_transform.scale):.6g})",
+            row("ATE", e.ate, ""),
+            row("RPE translation", e.rpe_translation, ""),
+            row("RPE rotation", e.rpe_rotation_deg, "°"),
+        ]
+    )

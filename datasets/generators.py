@@ -1,0 +1,116 @@
+"""Seeded generators of synthetic pose graphs with known ground truth.
+
+* ``manhattan_world``: a planar robot driving on a unit grid (the M3500 benchmark's shape),
+  with loop closures wherever it comes back to a cell it visited before.
+* ``sphere``: poses on the surface of a sphere, ring after ring (the sphere2500 benchmark's
+  shape), with loop closures between neighbouring rings.
+
+Both return the graph, with initial values from composing the noisy odometry, and the truth.
+Measurements are Z = (Xᵢ⁻¹ Xⱼ) · Exp(n), n ~ N(0, Σ), with information Σ⁻¹ (CONVENTIONS.md).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from posegraph.graph import PoseGraph
+from posegraph.lie import SE2, SE3, LieGroup
+from posegraph.lie.so3 import exp_matrix
+
+
+def _noisy_graph(
+    truth: LieGroup,
+    i: np.ndarray,
+    j: np.ndarray,
+    sigmas: np.ndarray,
+    rng: np.random.Generator,
+) -> PoseGraph:
+    """The graph of edges i → j measured with noise of standard deviations ``sigmas``,
+    initialised by composing the noisy odometry edges (k → k+1), which must come first."""
+    group = type(truth)
+    noise = rng.normal(size=(i.size, group.dof)) * sigmas
+    measurements = truth[i].between(truth[j]).retract(noise)
+    information = np.broadcast_to(np.diag(1.0 / sigmas**2), (i.size, group.dof, group.dof))
+    count = truth.batch_shape[0]
+    initial = [truth[0]]
+    for k in range(count - 1):  # the odometry edges are the first count − 1
+        initial.append(initial[-1] @ measurements[k])
+    graph = PoseGraph(group)
+    graph.add_nodes(np.arange(count), group.stack(initial))
+    graph.add_edges(i, j, measurements, information)
+    return graph
+
+
+def manhattan_world(
+    num_poses: int = 500,
+    grid_size: int = 12,
+    loop_probability: float = 0.5,
+    translation_sigma: float = 0.05,
+    rotation_sigma: float = 0.01,
+    seed: int = 0,
+) -> tuple[PoseGraph, SE2]:
+    """A robot on a ``grid_size`` × ``grid_size`` unit grid: each step it goes straight (70%)
+    or turns ±90° (15% each) and moves one cell; it turns back at the border. A later visit to
+    an earlier pose's cell (more than 10 steps apart) adds that loop closure with probability
+    ``loop_probability``."""
+    rng = np.random.default_rng(seed)
+    x, y, heading = 0, 0, 0
+    cells, headings = [(x, y)], [heading]
+    directions = [(1, 0), (0, 1), (-1, 0), (0, -1)]
+    while len(cells) < num_poses:
+        turn = rng.choice([0, 1, -1], p=[0.7, 0.15, 0.15])
+        for candidate in (turn, -turn or 1, 2):
+            h = (heading + candidate) % 4
+            nx, ny = x + directions[h][0], y + directions[h][1]
+            if 0 <= nx < grid_size and 0 <= ny < grid_size:
+                heading, x, y = h, nx, ny
+                break
+        cells.append((x, y))
+        headings.append(heading)
+    cells_array = np.array(cells, dtype=float)
+    truth = SE2(np.array(headings) * np.pi / 2, cells_array)
+    loops_i, loops_j = [], []
+    first_visit: dict[tuple[int, int], list[int]] = {}
+    for k, cell in enumerate(cells):
+        for earlier in first_visit.get(cell, []):
+            if k - earlier > 10 and rng.random() < loop_probability:
+                loops_i.append(earlier)
+                loops_j.append(k)
+        first_visit.setdefault(cell, []).append(k)
+    i = np.concatenate([np.arange(num_poses - 1), loops_i]).astype(np.int64)
+    j = np.concatenate([np.arange(1, num_poses), loops_j]).astype(np.int64)
+    sigmas = np.array([translation_sigma, translation_sigma, rotation_sigma])
+    return _noisy_graph(truth, i, j, sigmas, rng), truth
+
+
+def sphere(
+    rings: int = 10,
+    poses_per_ring: int = 20,
+    radius: float = 10.0,
+    translation_sigma: float = 0.05,
+    rotation_sigma: float = 0.01,
+    seed: int = 0,
+) -> tuple[PoseGraph, SE3]:
+    """Poses on a sphere, ring by ring from bottom to top, each facing along its ring; every
+    pose after the first ring closes a loop with the pose below it in the previous ring."""
+    rng = np.random.default_rng(seed)
+    count = rings * poses_per_ring
+    ring = np.arange(count) // poses_per_ring
+    azimuth = 2 * np.pi * (np.arange(count) % poses_per_ring) / poses_per_ring
+    elevation = -np.pi / 2 + np.pi * (ring + 1) / (rings + 1)
+    position = radius * np.stack(
+        [
+            np.cos(elevation) * np.cos(azimuth),
+            np.cos(elevation) * np.sin(azimuth),
+            np.sin(elevation),
+        ],
+        axis=1,
+    )
+    yaw = exp_matrix(np.stack([np.zeros(count), np.zeros(count), azimuth + np.pi / 2], axis=1))
+    pitch = exp_matrix(np.stack([-elevation, np.zeros(count), np.zeros(count)], axis=1))
+    truth = SE3(yaw @ pitch, position)
+    above = np.arange(poses_per_ring, count)
+    i = np.concatenate([np.arange(count - 1), above - poses_per_ring])
+    j = np.concatenate([np.arange(1, count), above])
+    sigmas = np.array([translation_sigma] * 3 + [rotation_sigma] * 3)
+    return _noisy_graph(truth, i, j, sigmas, rng), truth

@@ -1,0 +1,78 @@
+"""File-format choice for conversion and evaluation: graphs (g2o, TORO) and trajectories
+(TUM, KITTI), told apart by suffix, or for ``.txt`` by the number of columns."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from .graph import PoseGraph
+from .io import ReadOptions, read_graph, write_graph
+from .io.errors import GraphFileError
+from .io.parsing import read_lines
+from .trajectory_io import Trajectory, as_se3, read_trajectory, write_trajectory
+
+SUFFIX_FORMATS = {
+    ".g2o": "g2o",
+    ".graph": "toro",
+    ".toro": "toro",
+    ".tum": "tum",
+    ".kitti": "kitti",
+}
+GRAPH_FORMATS = ("g2o", "toro")
+TRAJECTORY_FORMATS = ("tum", "kitti")
+
+
+def output_format(path: str, requested: str | None = None) -> str:
+    """The format to write ``path`` in: ``requested``, or by suffix."""
+    if requested is not None:
+        return requested
+    suffix = Path(path).suffix.lower()
+    if suffix not in SUFFIX_FORMATS:
+        known = ", ".join(SUFFIX_FORMATS)
+        raise ValueError(
+            f"{path}: cannot tell the output format from {suffix or 'no suffix'!r} "
+            f"(known: {known}); say --to g2o|toro|tum|kitti"
+        )
+    return SUFFIX_FORMATS[suffix]
+
+
+def input_format(path: str) -> str:
+    """g2o/TORO by their tags, TUM/KITTI by suffix or, for other suffixes, by column count."""
+    suffix = Path(path).suffix.lower()
+    if suffix in SUFFIX_FORMATS:
+        return SUFFIX_FORMATS[suffix]
+    lines = read_lines(path)
+    if not lines:
+        raise GraphFileError(path, None, "holds no poses")
+    first = lines[0][1]
+    if first[0].isalpha() or first[0].startswith("_"):
+        return "g2o"  # a tagged graph file (g2o or TORO, the reader tells them apart)
+    if len(first) in (8, 12):
+        return "tum" if len(first) == 8 else "kitti"
+    raise GraphFileError(path, lines[0][0], "not a graph, TUM (8 columns) or KITTI (12) line")
+
+
+def convert(
+    graph: PoseGraph,
+    path: str,
+    to: str | None = None,
+    sim3_dialect: str = "a",
+    g2o_rotation_information: bool = False,
+) -> str:
+    """Write ``graph`` to ``path`` as a graph or as its poses' trajectory; returns the format."""
+    file_format = output_format(path, to)
+    if file_format in GRAPH_FORMATS:
+        write_graph(graph, path, file_format, g2o_rotation_information, sim3_dialect)
+    else:
+        trajectory = Trajectory(graph.node_ids.astype(float), as_se3(graph.values))
+        write_trajectory(trajectory, path, file_format)
+    return file_format
+
+
+def load_trajectory(path: str, options: ReadOptions | None = None) -> Trajectory:
+    """Poses of any supported file: a graph's node values keyed by id, or a trajectory."""
+    file_format = input_format(path)
+    if file_format in TRAJECTORY_FORMATS:
+        return read_trajectory(path, file_format)
+    graph = read_graph(path, options).graph
+    return Trajectory(graph.node_ids.astype(float), as_se3(graph.values))

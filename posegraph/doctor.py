@@ -1,0 +1,157 @@
+"""``diagnose``: the graph doctor behind ``posegraph info``.
+
+It reports what a graph holds and every problem worth knowing before optimising it, each with
+a one-line suggestion: disconnected components, missing gauge, ill-conditioned or asymmetric
+information, duplicate edges, self-loops, breaks in the odometry chain, and lines skipped when
+reading leniently.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .factors import chi2
+from .io.reader import ReadResult
+
+CONDITION_LIMIT = 1e12
+
+
+@dataclasses.dataclass(frozen=True)
+class Problem:
+    what: str
+    suggestion: str
+
+
+@dataclasses.dataclass(frozen=True)
+class Diagnosis:
+    """What ``posegraph info`` prints (and emits as JSON)."""
+
+    path: str
+    file_format: str
+    group: str
+    tag_counts: dict[str, int]
+    nodes: int
+    edges: int
+    priors: int
+    components: list[int]
+    """Node count of every connected component, largest first."""
+    gauge: str
+    condition_numbers: dict[str, float]
+    """min, median and max condition number of the information matrices."""
+    initial_error: float
+    initial_chi2: float
+    problems: list[Problem]
+
+    def as_dict(self) -> dict:
+        record = dataclasses.asdict(self)
+        record["problems"] = [dataclasses.asdict(p) for p in self.problems]
+        return record
+
+
+def diagnose(read: ReadResult) -> Diagnosis:
+    """Examine a graph as read from a file."""
+    graph = read.graph
+    problems: list[Problem] = []
+    labels = graph.components() if graph.num_nodes else np.zeros(0, dtype=np.int64)
+    sizes = sorted(np.bincount(labels).tolist(), reverse=True) if labels.size else []
+    if len(sizes) > 1:
+        problems.append(
+            Problem(
+                f"{len(sizes)} connected components (sizes {', '.join(map(str, sizes[:5]))}"
+                f"{', …' if len(sizes) > 5 else ''})",
+                "each is optimised in its own frame, its lowest id held; add edges to tie them together",
+            )
+        )
+
+    held = graph.gauge_nodes()
+    fixed = graph.node_ids[graph.fixed]
+    if fixed.size:
+        gauge = f"fixed by FIX: nodes {', '.join(map(str, fixed[:10].tolist()))}"
+    elif len(graph.priors):
+        gauge = f"set by {len(graph.priors)} prior(s)"
+    else:
+        gauge = f"lowest id held: node {', '.join(map(str, graph.node_ids[held][:10].tolist()))}"
+
+    information = np.concatenate([graph.edges.information, graph.priors.information])
+    condition = np.linalg.cond(information) if len(information) else np.zeros(0)
+    conditions = {}
+    if condition.size:
+        conditions = {
+            "min": float(condition.min()),
+            "median": float(np.median(condition)),
+            "max": float(condition.max()),
+        }
+        bad = np.flatnonzero(condition > CONDITION_LIMIT)
+        if bad.size:
+            problems.append(
+                Problem(
+                    f"{bad.size} information matrices have condition number above {CONDITION_LIMIT:.0e}",
+                    "check those edges' noise models; near-singular weights make the solve inaccurate",
+                )
+            )
+        asymmetry = np.abs(information - np.swapaxes(information, 1, 2)).max()
+        if asymmetry > 0:
+            problems.append(
+                Problem(
+                    f"information matrices are not symmetric (max |Ω − Ωᵀ| = {asymmetry:.3g})",
+                    "symmetrise them as (Ω + Ωᵀ)/2 before optimising",
+                )
+            )
+
+    i, j = graph.edges.i, graph.edges.j
+    if i.size:
+        pairs = np.stack([np.minimum(i, j), np.maximum(i, j)], axis=1)
+        _, counts = np.unique(pairs, axis=0, return_counts=True)
+        duplicates = int((counts - 1).sum())
+        if duplicates:
+            problems.append(
+                Problem(
+                    f"{duplicates} duplicate edge(s) between the same pair of nodes",
+                    "fine if they are independent measurements; if copies, they count twice",
+                )
+            )
+    chained = np.zeros(max(graph.num_nodes - 1, 0), dtype=bool)
+    consecutive = np.abs(j - i) == 1
+    chained[np.minimum(i, j)[consecutive]] = True
+    breaks = np.flatnonzero(~chained)
+    if breaks.size:
+        at = ", ".join(f"{graph.node_ids[k]}→{graph.node_ids[k + 1]}" for k in breaks[:5])
+        problems.append(
+            Problem(
+                f"the odometry chain breaks {breaks.size} time(s) (at {at}{', …' if breaks.size > 5 else ''})",
+                "odometry initialisation bridges breaks through other edges; check for missing odometry",
+            )
+        )
+    if read.skipped:
+        first = ", ".join(f"line {line}: {why}" for line, why in read.skipped[:3])
+        problems.append(
+            Problem(
+                f"{len(read.skipped)} line(s) skipped ({first}{', …' if len(read.skipped) > 3 else ''})",
+                "fix those lines, or accept that they are left out",
+            )
+        )
+    if read.nodes_without_vertex.size:
+        problems.append(
+            Problem(
+                f"{read.nodes_without_vertex.size} node(s) have no vertex line",
+                "they were initialised by composing odometry; use --init chordal for a better start",
+            )
+        )
+    total = chi2(graph.values, graph.edges, graph.priors)
+    return Diagnosis(
+        path=read.path,
+        file_format=read.format,
+        group=graph.group.__name__,
+        tag_counts=dict(read.tag_counts),
+        nodes=graph.num_nodes,
+        edges=graph.num_edges,
+        priors=len(graph.priors),
+        components=sizes,
+        gauge=gauge,
+        condition_numbers=conditions,
+        initial_error=0.5 * total,
+        initial_chi2=total,
+        problems=problems,
+    )

@@ -1,0 +1,118 @@
+"""Figures of pose graphs and trajectories (matplotlib's Agg backend: works headless).
+
+Odometry (edges between consecutive nodes) is drawn as the trajectory line; loop closures as
+thin lines of a lighter shade. Several inputs are overlaid, one colour each (before/after).
+SE2 graphs are drawn top-down; SE3 and Sim3 in 3D (or top-down with ``view="top"``).
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.collections import LineCollection  # noqa: E402
+from mpl_toolkits.mplot3d.art3d import Line3DCollection  # noqa: E402
+
+from .graph import PoseGraph  # noqa: E402
+from .lie import SE2  # noqa: E402
+from .trajectory_io import as_se3  # noqa: E402
+
+COLORS = ["tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown"]
+
+
+def _segments(positions: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+    return np.stack([positions[i], positions[j]], axis=1)
+
+
+def _new_axes(three_d: bool):
+    figure = plt.figure(figsize=(8, 7), dpi=110)
+    axes = figure.add_subplot(projection="3d") if three_d else figure.add_subplot()
+    return figure, axes
+
+
+def _draw(axes, three_d: bool, positions, loops, color, label) -> None:
+    dims = 3 if three_d else 2
+    points = positions[:, :dims]
+    if loops is not None and len(loops):
+        collection = (Line3DCollection if three_d else LineCollection)(
+            loops[:, :, :dims], colors=color, linewidths=0.4, alpha=0.35
+        )
+        axes.add_collection(collection)
+    axes.plot(*points.T, color=color, linewidth=1.0, label=label)
+
+
+def _finish(figure, axes, three_d: bool, title: str | None, path: str) -> None:
+    if three_d:
+        axes.set_xlabel("x")
+        axes.set_ylabel("y")
+        axes.set_zlabel("z")
+        low, high = axes.get_w_lims()[::2], axes.get_w_lims()[1::2]
+        span = max(h - lo for lo, h in zip(low, high, strict=True)) / 2
+        centre = [(lo + h) / 2 for lo, h in zip(low, high, strict=True)]
+        axes.set_xlim(centre[0] - span, centre[0] + span)
+        axes.set_ylim(centre[1] - span, centre[1] + span)
+        axes.set_zlim(centre[2] - span, centre[2] + span)
+    else:
+        axes.set_aspect("equal", adjustable="datalim")
+        axes.set_xlabel("x")
+        axes.set_ylabel("y")
+        axes.autoscale_view()
+    if title:
+        axes.set_title(title)
+    axes.legend(loc="best", fontsize="small")
+    save_figure(figure, path)
+
+
+def save_figure(figure, path: str) -> None:
+    """Save atomically (temporary file beside the target, then rename) and close."""
+    target = Path(path)
+    handle, temporary = tempfile.mkstemp(
+        prefix=f".{target.stem}.", suffix=target.suffix, dir=target.parent or "."
+    )
+    os.close(handle)
+    try:
+        figure.savefig(temporary, bbox_inches="tight")
+        os.replace(temporary, target)
+    finally:
+        plt.close(figure)
+        Path(temporary).unlink(missing_ok=True)
+
+
+def plot_graphs(
+    graphs: list[tuple[str, PoseGraph]], path: str, title: str | None = None, view: str = "auto"
+) -> None:
+    """Overlay pose graphs (label, graph) in one figure written to ``path``."""
+    three_d = view == "3d" or (view == "auto" and any(g.group is not SE2 for _, g in graphs))
+    figure, axes = _new_axes(three_d)
+    for k, (label, graph) in enumerate(graphs):
+        positions = as_se3(graph.values).translation
+        loop = np.abs(graph.edges.j - graph.edges.i) != 1
+        loops = _segments(positions, graph.edges.i[loop], graph.edges.j[loop])
+        count = int(loop.sum())
+        _draw(
+            axes,
+            three_d,
+            positions,
+            loops,
+            COLORS[k % len(COLORS)],
+            f"{label} ({count} loop closures)",
+        )
+    _finish(figure, axes, three_d, title, path)
+
+
+def plot_trajectories(
+    trajectories: list[tuple[str, np.ndarray]], path: str, title: str | None = None
+) -> None:
+    """Overlay trajectories given as (label, (N, 3) positions); 3D unless all are planar."""
+    three_d = any(np.ptp(p[:, 2]) > 1e-9 for _, p in trajectories)
+    figure, axes = _new_axes(three_d)
+    for k, (label, positions) in enumerate(trajectories):
+        _draw(axes, three_d, positions, None, COLORS[k % len(COLORS)], label)
+    _finish(figure, axes, three_d, title, path)

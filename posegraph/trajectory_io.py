@@ -1,0 +1,99 @@
+"""Trajectory files: TUM (``t tx ty tz qx qy qz qw``) and KITTI (3 × 4 row-major [R | t]).
+
+A trajectory is a pair (keys, SE3 poses). For TUM the key is the time stamp column; a pose
+graph's export writes node ids there. KITTI lines have no key: the line index is the key.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .io.atomic import atomic_write_text
+from .io.errors import GraphFileError
+from .io.parsing import read_lines
+from .lie import SE2, SE3, LieGroup, Sim3
+
+
+@dataclasses.dataclass(frozen=True)
+class Trajectory:
+    """Stamped poses: ``keys`` (N,) and ``poses`` (SE3, batch (N,))."""
+
+    keys: np.ndarray
+    poses: SE3
+
+    @property
+    def positions(self) -> np.ndarray:
+        return self.poses.translation
+
+
+def as_se3(values: LieGroup) -> SE3:
+    """SE3 poses of any pose group: SE2 lifted to the plane z = 0; Sim3 keeps R and t."""
+    if isinstance(values, SE3):
+        return values
+    if isinstance(values, SE2):
+        count = values.batch_shape[0]
+        rotation = np.zeros((count, 3, 3))
+        rotation[:, :2, :2] = values.rotation_matrix
+        rotation[:, 2, 2] = 1.0
+        translation = np.concatenate([values.translation, np.zeros((count, 1))], axis=1)
+        return SE3(rotation, translation)
+    if isinstance(values, Sim3):
+        return SE3(values.rotation, values.translation)
+    raise TypeError(f"no SE3 trajectory for {type(values).__name__}")
+
+
+def format_tum(trajectory: Trajectory) -> str:
+    q, t = trajectory.poses.as_quaternion_translation()
+    rows = np.concatenate([trajectory.keys[:, None].astype(float), t, q], axis=1)
+    return "".join(" ".join(repr(x) for x in row) + "\n" for row in rows.tolist())
+
+
+def format_kitti(trajectory: Trajectory) -> str:
+    rows = trajectory.poses.as_matrix()[:, :3, :].reshape(-1, 12)
+    return "".join(" ".join(repr(x) for x in row) + "\n" for row in rows.tolist())
+
+
+def write_trajectory(trajectory: Trajectory, path: str, file_format: str) -> None:
+    """Write "tum" or "kitti" atomically."""
+    text = {"tum": format_tum, "kitti": format_kitti}[file_format](trajectory)
+    atomic_write_text(path, text)
+
+
+def read_trajectory(path: str, file_format: str) -> Trajectory:
+    """Read "tum" or "kitti"; errors name ``file:line``."""
+    lines = read_lines(path)
+    width = {"tum": 8, "kitti": 12}[file_format]
+    if not lines:
+        raise GraphFileError(path, None, f"holds no {file_format.upper()} poses")
+    rows = []
+    for number, tokens in lines:
+        if len(tokens) != width:
+            raise GraphFileError(
+                path,
+                number,
+                f"{file_format.upper()} lines have {width} numbers, found {len(tokens)}",
+            )
+        try:
+            row = np.array(tokens, dtype=float)
+        except ValueError:
+            raise GraphFileError(path, number, "a value is not a number") from None
+        if not np.all(np.isfinite(row)):
+            raise GraphFileError(path, number, "NaN or infinite value")
+        rows.append(row)
+    numbers = np.array(rows)
+    if file_format == "tum":
+        norms = np.linalg.norm(numbers[:, 4:8], axis=1)
+        if np.any(norms < 1e-9):
+            raise GraphFileError(path, lines[int(np.argmin(norms))][0], "quaternion has zero norm")
+        return Trajectory(
+            numbers[:, 0], SE3.from_quaternion_translation(numbers[:, 4:8], numbers[:, 1:4])
+        )
+    matrices = numbers.reshape(-1, 3, 4)
+    rotation = matrices[:, :, :3]
+    if np.abs(rotation @ np.swapaxes(rotation, 1, 2) - np.eye(3)).max() > 1e-3:
+        raise GraphFileError(path, None, "a 3 × 3 block is not a rotation matrix")
+    return Trajectory(
+        np.arange(len(rows), dtype=float), SE3(rotation, matrices[:, :, 3]).normalize()
+    )

@@ -1,0 +1,261 @@
+"""The ``posegraph`` command, driven as a subprocess the way a new user runs it."""
+
+from __future__ import annotations
+
+import json
+import os
+import pty
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+from posegraph_cli.schema import SCHEMAS
+from posegraph_datasets import example
+
+from posegraph.io import read_graph
+
+from .malformed import MALFORMED
+from .test_malformed import write_case
+
+jsonschema = pytest.importorskip("jsonschema")
+
+COMMAND = (
+    [shutil.which("posegraph")]
+    if shutil.which("posegraph")
+    else [sys.executable, "-m", "posegraph_cli.main"]
+)
+EXAMPLE = str(example("sphere_small.g2o"))
+EXAMPLE_2D = str(example("manhattan_small.g2o"))
+
+
+def run(*args, check_exit: int | None = 0, timeout: float = 300):
+    completed = subprocess.run(
+        [*COMMAND, *map(str, args)], capture_output=True, text=True, timeout=timeout
+    )
+    if check_exit is not None:
+        assert completed.returncode == check_exit, completed.stderr + completed.stdout
+    return completed
+
+
+def run_json(command: str, *args):
+    completed = run(command, *args, "--json")
+    document = json.loads(completed.stdout)
+    jsonschema.validate(document, SCHEMAS[command])
+    return document
+
+
+def assert_not_blank(png) -> None:
+    import matplotlib.image
+
+    pixels = matplotlib.image.imread(str(png))[..., :3]
+    assert pixels.var() > 1e-3
+    assert (pixels.min(axis=2) < 0.9).mean() > 0.005  # more than 0.5% of the pixels are drawn
+
+
+def test_version_and_help():
+    assert run("--version").stdout.startswith("posegraph ")
+    for command in ("optimize", "info", "convert", "plot", "eval", "bench"):
+        text = run(command, "--help").stdout
+        assert "examples:" in text and f"posegraph {command}" in text
+
+
+def test_optimize_the_bundled_example(tmp_path):
+    out, figure = tmp_path / "out.g2o", tmp_path / "out.png"
+    document = run_json("optimize", EXAMPLE, "-o", out, "--plot", figure)
+    summary = document["summary"]
+    assert summary["converged"] and summary["final_error"] < summary["initial_error"]
+    assert read_graph(str(out)).graph.num_nodes == document["nodes"] == 160
+    assert_not_blank(figure)
+    # Piped output: a readable summary on stdout and no progress lines on stderr.
+    text = run("optimize", EXAMPLE)
+    assert "termination" in text.stdout and "error ½Σrᵀ Ω r" in text.stdout
+    assert text.stderr == ""
+    assert run("optimize", EXAMPLE, "--quiet").stdout == ""
+
+
+def test_progress_is_shown_on_a_terminal(tmp_path):
+    """Under a pseudo-terminal, optimize prints an iteration table while it runs."""
+    main, secondary = pty.openpty()
+    process = subprocess.Popen(
+        [*COMMAND, "optimize", EXAMPLE], stdin=secondary, stdout=secondary, stderr=secondary
+    )
+    os.close(secondary)
+    output = b""
+    while True:
+        try:
+            chunk = os.read(main, 4096)
+        except OSError:
+            break
+        if not chunk:
+            break
+        output += chunk
+    os.close(main)
+    assert process.wait(timeout=120) == 0
+    text = output.decode()
+    assert "iter" in text and "lambda" in text
+    assert "    1 " in text  # the first iteration's line
+
+
+def test_optimize_refuses_to_overwrite_its_input(tmp_path):
+    source = tmp_path / "graph.g2o"
+    shutil.copy(EXAMPLE, source)
+    before = source.read_text()
+    refused = run("optimize", source, "-o", source, check_exit=2)
+    assert "refusing to overwrite" in refused.stderr and source.read_text() == before
+    run("optimize", source, "-o", source, "--overwrite")
+    assert source.read_text() != before
+
+
+def test_optimize_options(tmp_path):
+    document = run_json(
+        "optimize", EXAMPLE_2D, "--solver", "gn", "--init", "odometry", "--fix", "3", "7"
+    )
+    assert document["summary"]["method"] == "gn"
+    assert document["summary"]["initialization"] == "odometry"
+    assert document["summary"]["num_variables"] == (400 - 2) * 3
+    limited = run("optimize", EXAMPLE, "--max-iterations", "1", "--json", check_exit=1)
+    assert json.loads(limited.stdout)["summary"]["termination"] == "maximum iterations reached"
+    unknown = run("optimize", EXAMPLE, "--fix", "99999", check_exit=2)
+    assert unknown.stderr.count("\n") == 1 and "node 99999" in unknown.stderr
+
+
+def test_ctrl_c_stops_cleanly_and_writes_the_best_values(tmp_path, shared_dataset):
+    """SIGINT during a long run: exit 1, the values so far written, no traceback."""
+    source, out = shared_dataset("torus3D.g2o"), tmp_path / "partial.g2o"
+    process = subprocess.Popen(
+        [*COMMAND, "optimize", source, "-o", out, "--init", "file", "--json"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    time.sleep(4.0)
+    process.send_signal(signal.SIGINT)
+    stdout, stderr = process.communicate(timeout=120)
+    assert process.returncode == 1, stderr
+    assert "Traceback" not in stderr
+    summary = json.loads(stdout)["summary"]
+    assert summary["termination"] == "interrupted (Ctrl-C)"
+    assert read_graph(str(out)).graph.num_nodes == 5000
+    assert summary["final_error"] < summary["initial_error"]
+
+
+def test_info_reports_problems_with_suggestions(tmp_path):
+    document = run_json("info", EXAMPLE_2D)
+    assert document["nodes"] == 400 and document["components"] == [400]
+    assert document["problems"] == []
+    broken = tmp_path / "two_parts.g2o"
+    lines = [
+        line
+        for line in open(EXAMPLE_2D).read().splitlines()
+        if not line.startswith("EDGE_SE2 199 200 ")
+    ]
+    broken.write_text("\n".join(lines) + "\nEDGE_SE2 5 5 1 0 0 1 0 0 1 0 1\n")
+    document = run_json("info", broken, "--lenient")
+    problems = " | ".join(p["what"] for p in document["problems"])
+    assert "odometry chain breaks" in problems and "skipped" in problems
+    text = run("info", broken, "--lenient").stdout
+    assert "→" in text  # every problem comes with a suggestion
+
+
+def test_convert_between_formats(tmp_path):
+    toro, back = tmp_path / "g.graph", tmp_path / "back.g2o"
+    assert run_json("convert", EXAMPLE_2D, toro)["format"] == "toro"
+    run("convert", toro, back)
+    original, returned = read_graph(EXAMPLE_2D).graph, read_graph(str(back)).graph
+    np.testing.assert_allclose(returned.values.as_matrix(), original.values.as_matrix(), atol=1e-12)
+    np.testing.assert_allclose(returned.edges.information, original.edges.information)
+    run("convert", EXAMPLE, tmp_path / "p.tum")
+    tum = np.loadtxt(tmp_path / "p.tum")
+    assert tum.shape == (160, 8) and np.allclose(np.linalg.norm(tum[:, 4:], axis=1), 1)
+    run("convert", EXAMPLE, tmp_path / "p.txt", "--to", "kitti")
+    kitti = np.loadtxt(tmp_path / "p.txt").reshape(-1, 3, 4)
+    assert np.allclose(kitti[:, :, :3] @ np.swapaxes(kitti[:, :, :3], 1, 2), np.eye(3), atol=1e-9)
+    unknown = run("convert", EXAMPLE, tmp_path / "p.xyz", check_exit=2)
+    assert "--to" in unknown.stderr
+
+
+def test_plot_overlays_graphs(tmp_path):
+    optimised, figure = tmp_path / "opt.g2o", tmp_path / "overlay.png"
+    run("optimize", EXAMPLE_2D, "-o", optimised)
+    run_json("plot", EXAMPLE_2D, optimised, "-o", figure)
+    assert_not_blank(figure)
+    run("plot", EXAMPLE, "-o", tmp_path / "top.png", "--view", "top")
+    assert_not_blank(tmp_path / "top.png")
+
+
+def test_eval_reports_ate_and_rpe(tmp_path):
+    from posegraph_datasets.generators import sphere
+
+    from posegraph.trajectory_io import Trajectory, write_trajectory
+
+    graph, truth = sphere(rings=8, poses_per_ring=20, seed=2)  # the bundled example's truth
+    truth_path = tmp_path / "truth.tum"
+    write_trajectory(Trajectory(np.arange(160.0), truth), str(truth_path), "tum")
+    optimised = tmp_path / "opt.g2o"
+    run("optimize", EXAMPLE, "-o", optimised)
+    before = run_json("eval", EXAMPLE, truth_path)
+    after = run_json("eval", optimised, truth_path, "--plot", tmp_path / "ate.png")
+    assert after["ate"]["rmse"] < before["ate"]["rmse"]
+    assert after["matched_poses"] == 160
+    assert_not_blank(tmp_path / "ate.png")
+    sim3 = run_json("eval", optimised, truth_path, "--align", "sim3")
+    assert sim3["ate"]["rmse"] <= after["ate"]["rmse"] + 1e-12
+    text = run("eval", optimised, truth_path).stdout
+    assert "ATE" in text and "RPE" in text
+
+
+@pytest.mark.parametrize("name, content, line, words", MALFORMED, ids=[m[0] for m in MALFORMED])
+def test_malformed_input_gives_one_line_and_exit_2(tmp_path, name, content, line, words):
+    path = write_case(tmp_path, name, content)
+    completed = run("optimize", path, "-o", tmp_path / "out.g2o", check_exit=2)
+    assert completed.stderr.count("\n") == 1, completed.stderr
+    assert "Traceback" not in completed.stderr and words in completed.stderr
+    assert str(path) in completed.stderr
+    assert not (tmp_path / "out.g2o").exists()
+
+
+@pytest.mark.parametrize("command", ["info", "convert", "plot"])
+@pytest.mark.parametrize("case", [0, 3, 7, 11, 13, 17], ids=lambda k: MALFORMED[k][0])
+def test_malformed_input_for_other_commands(tmp_path, command, case):
+    name, content, _, words = MALFORMED[case]
+    path = write_case(tmp_path, name, content)
+    extra = {"info": [], "convert": [tmp_path / "o.graph"], "plot": ["-o", tmp_path / "o.png"]}[
+        command
+    ]
+    completed = run(command, path, *extra, check_exit=2)
+    assert completed.stderr.count("\n") == 1 and words in completed.stderr
+    assert "Traceback" not in completed.stderr
+
+
+def test_debug_shows_the_traceback(tmp_path):
+    path = write_case(tmp_path, *MALFORMED[0][:2])
+    assert "Traceback" in run("info", path, "--debug", check_exit=2).stderr
+
+
+BENCHMARK_FILES = [
+    "tinyGrid3D.g2o",
+    "smallGrid3D.g2o",
+    "intel.g2o",
+    "MIT.g2o",
+    "CSAIL.g2o",
+    "manhattan.g2o",
+    "sphere2500.g2o",
+    "parking-garage.g2o",
+    "torus3D.g2o",
+    "sphere_bignoise_vertex3.g2o",
+]
+
+
+@pytest.mark.parametrize("name", BENCHMARK_FILES)
+def test_every_command_succeeds_on_the_benchmark_graphs(tmp_path, shared_dataset, name):
+    source = shared_dataset(name)
+    run("info", source)
+    run("convert", source, tmp_path / "g.graph")
+    run("plot", source, "-o", tmp_path / "g.png")
+    assert_not_blank(tmp_path / "g.png")
+    document = run_json("optimize", source, "-o", tmp_path / "opt.g2o")
+    assert document["summary"]["final_error"] <= document["summary"]["initial_error"]
