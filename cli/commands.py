@@ -52,7 +52,14 @@ def optimize(args: argparse.Namespace) -> int:
         method=args.solver, max_iterations=args.max_iterations, time_limit=args.time_limit
     )
     with Progress(enabled=not (args.quiet or args.json)) as progress:
-        result = posegraph.optimize(graph, init=args.init, options=options, callback=progress)
+        result = posegraph.optimize(
+            graph,
+            init=args.init,
+            options=options,
+            callback=progress,
+            robust=args.robust,
+            robust_edges=args.robust_edges,
+        )
     summary = result.summary
     if progress.interrupted:
         summary.termination = "interrupted (Ctrl-C)"

@@ -80,7 +80,25 @@ def _parser() -> argparse.ArgumentParser:
     opt.add_argument("input", help="g2o or TORO file")
     opt.add_argument("-o", "--output", help="write the optimised graph here (format by suffix)")
     opt.add_argument("--solver", choices=["lm", "gn"], default="lm", help="default: lm")
-    opt.add_argument("--init", choices=INITIALIZERS, default="file", help="default: file")
+    opt.add_argument(
+        "--init",
+        choices=INITIALIZERS,
+        default="auto",
+        help="default: auto (chordal relaxation when the graph has loops, else odometry)",
+    )
+    opt.add_argument(
+        "--robust",
+        metavar="KERNEL[:WIDTH]",
+        help="gnc (truncated least squares by graduated non-convexity), huber, cauchy, "
+        "geman-mcclure, tukey or dcs; width in Mahalanobis units (default √χ²_dof(0.999) for "
+        "gnc, √χ²_dof(0.95) for the others)",
+    )
+    opt.add_argument(
+        "--robust-edges",
+        choices=["loops", "all"],
+        default="loops",
+        help="edges the kernel applies to (default: loops, i.e. not between consecutive nodes)",
+    )
     opt.add_argument("--max-iterations", type=int, default=100, help="default: 100")
     opt.add_argument("--time-limit", type=float, help="seconds")
     opt.add_argument(

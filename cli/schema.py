@@ -56,6 +56,8 @@ SUMMARY = {
         "reused": {"type": "array", "items": {"type": "string"}},
         "initialization": {"type": "string"},
         "initialization_time": _NUMBER,
+        "robust": {"type": ["string", "null"]},
+        "rejected_edges": {"type": "array", "items": {"type": "integer"}},
         "history": {
             "type": "array",
             "items": {

@@ -22,6 +22,10 @@ def format_summary(
         f"  time            {summary.total_time:.3f} s: "
         + ", ".join(f"{name} {seconds:.3f}" for name, seconds in phases.items()),
     ]
+    if summary.robust:
+        lines.append(
+            f"  robust          {summary.robust}: {len(summary.rejected_edges)} edge(s) rejected"
+        )
     if output:
         lines.append(f"  wrote           {output}")
     if plot:

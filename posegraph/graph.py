@@ -157,6 +157,13 @@ class PoseGraph:
         self.structure_version += 1
         return np.arange(start, start + len(new))
 
+    def with_edges(self, keep: np.ndarray) -> PoseGraph:
+        """A copy holding only the between edges where ``keep`` (a mask or indices) holds."""
+        other = self.copy()
+        other.edges = self.edges.subset(keep)
+        other.structure_version += 1
+        return other
+
     def remove_edges(self, edge_indices) -> None:
         """Remove between edges by index (indices of later edges shift down)."""
         keep = np.ones(self.num_edges, dtype=bool)

@@ -20,16 +20,32 @@ _ODOMETRY_WEIGHT = 1.0
 _OTHER_WEIGHT = 2.0
 _COMPONENT_ROOT_WEIGHT = 4.0  # above every edge weight: used only where no edge reaches
 
-INITIALIZERS = ("file", "odometry", "spanning-tree")
+INITIALIZERS = ("auto", "file", "odometry", "spanning-tree", "chordal")
 """Names accepted by ``initialize``."""
+
+
+def choose(graph: PoseGraph) -> str:
+    """What ``auto`` picks: chordal relaxation when the graph has loops and its group has it
+    (SE2, SE3), else odometry composition (on a tree every initialiser gives the same values)."""
+    from .chordal import supports
+
+    loops = graph.num_edges - graph.num_nodes + int(graph.components().max(initial=-1)) + 1
+    return "chordal" if loops > 0 and supports(graph.group) else "odometry"
 
 
 def initialize(graph: PoseGraph, method: str) -> LieGroup:
     """Initial values by ``method``: "file" (the graph's values), "odometry" (compose the chain
-    i → i+1, bridging breaks through other edges) or "spanning-tree" (compose along the most
-    informative edges). Held nodes (fixed or priors' anchors) keep their values."""
+    i → i+1, bridging breaks through other edges), "spanning-tree" (compose along the most
+    informative edges), "chordal" (``posegraph.chordal``) or "auto" (``choose``). Fixed nodes
+    keep their values."""
+    if method == "auto":
+        method = choose(graph)
     if method == "file":
         return graph.values
+    if method == "chordal":
+        from .chordal import chordal_values
+
+        return chordal_values(graph)
     held = np.zeros(graph.num_nodes, dtype=bool)
     held[graph.fixed] = True
     prefer = {"odometry": "odometry", "spanning-tree": "information"}.get(method)

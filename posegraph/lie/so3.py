@@ -143,11 +143,12 @@ def jr_inv_matrix(phi: np.ndarray) -> np.ndarray:
 
 
 def project_to_rotation(matrix: np.ndarray) -> np.ndarray:
-    """The nearest rotation matrix (Frobenius norm), by SVD with the determinant fixed to +1."""
+    """The nearest rotation matrix (Frobenius norm) of (…, d, d) arrays, by SVD with the
+    determinant fixed to +1 (any d: also used for 2 × 2)."""
     u, _, vt = np.linalg.svd(np.asarray(matrix, float))
     d = np.sign(np.linalg.det(u @ vt))
     u = u.copy()
-    u[..., :, 2] *= d[..., None]
+    u[..., :, -1] *= d[..., None]
     return u @ vt
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from typing import Protocol
 
 import numpy as np
 
@@ -47,16 +48,29 @@ class _Clock:
         return time.perf_counter() - self.start
 
 
-class _Linearized:
-    """Residuals, Jacobians and error of the whole graph at some values."""
+class EdgeWeighting(Protocol):
+    """Turns the between edges' s = rᵀΩr into their costs ρ(s) and IRLS weights ρ′(s)."""
 
-    def __init__(self, graph: PoseGraph, values: LieGroup) -> None:
+    def cost_and_weights(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...
+
+
+class _Linearized:
+    """Residuals, Jacobians and error ½ (Σ ρ(s) + Σ s_prior) of the whole graph at some values,
+    and the between edges' information weighted for IRLS."""
+
+    def __init__(self, graph: PoseGraph, values: LieGroup, weighting: EdgeWeighting | None) -> None:
         self.values = values
         self.between: Linearization = linearize_between(values, graph.edges)
         self.priors: Linearization = linearize_priors(values, graph.priors)
-        chi2 = weighted_squares(self.between.residuals, graph.edges.information).sum()
-        chi2 += weighted_squares(self.priors.residuals, graph.priors.information).sum()
-        self.error = 0.5 * float(chi2)
+        self.squared = weighted_squares(self.between.residuals, graph.edges.information)
+        prior_total = weighted_squares(self.priors.residuals, graph.priors.information).sum()
+        if weighting is None:
+            self.information = graph.edges.information
+            self.error = 0.5 * float(self.squared.sum() + prior_total)
+        else:
+            cost, weights = weighting.cost_and_weights(self.squared)
+            self.information = graph.edges.information * weights[:, None, None]
+            self.error = 0.5 * float(cost.sum() + prior_total)
 
 
 def optimize(
@@ -64,12 +78,15 @@ def optimize(
     options: SolverOptions | None = None,
     callback: Callback | None = None,
     system: NormalEquations | None = None,
+    weighting: EdgeWeighting | None = None,
 ) -> Result:
     """Minimise ½ Σ rᵀΩr over the graph's free nodes, starting from ``graph.values``.
 
     The gauge is ``graph.gauge_nodes()`` (fixed nodes, or the lowest id of each component
     without a prior). ``system`` passes in a ``NormalEquations`` built earlier for the same
-    structure, to reuse its pattern and symbolic factorisation. The graph is not modified.
+    structure, to reuse its pattern and symbolic factorisation. ``weighting`` makes the cost
+    robust (``posegraph.robust.Robustifier``) or weighs edges (IRLS with its weights re-evaluated
+    at every linearisation). The graph is not modified.
     """
     options = SolverOptions() if options is None else options
     clock = _Clock()
@@ -79,7 +96,7 @@ def optimize(
     else:
         reused = ["sparsity pattern", "symbolic factorization"]
     clock.lap("other")
-    current = _Linearized(graph, graph.values)
+    current = _Linearized(graph, graph.values, weighting)
     clock.lap("linearize")
     initial_error = current.error
     history: list[IterationRecord] = []
@@ -102,7 +119,7 @@ def optimize(
         )
 
     data, gradient = system.assemble(
-        current.between, graph.edges.information, current.priors, graph.priors.information
+        current.between, current.information, current.priors, graph.priors.information
     )
     clock.lap("assemble")
     lm = options.method == "lm"
@@ -138,7 +155,7 @@ def optimize(
         trial = None
         if step_ok:
             trial_values = current.values.retract(system.scatter(step, graph.num_nodes))
-            trial = _Linearized(graph, trial_values)
+            trial = _Linearized(graph, trial_values, weighting)
             clock.lap("linearize")
         step_norm = float(np.linalg.norm(step))
         accepted = trial is not None and np.isfinite(trial.error) and trial.error < current.error
@@ -176,7 +193,7 @@ def optimize(
             termination, converged = "step below tolerance", True
             break
         data, gradient = system.assemble(
-            current.between, graph.edges.information, current.priors, graph.priors.information
+            current.between, current.information, current.priors, graph.priors.information
         )
         diagonal = system.diagonal(data)
         clock.lap("assemble")

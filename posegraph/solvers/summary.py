@@ -42,6 +42,10 @@ class Summary:
     initialization: str = "file"
     """How the starting values were made (``posegraph.initialization.INITIALIZERS``)."""
     initialization_time: float = 0.0
+    robust: str | None = None
+    """The robust kernel and width used ("gnc:3.36", "cauchy:2"), or None for least squares."""
+    rejected_edges: list[int] = dataclasses.field(default_factory=list)
+    """Indices of the between edges rejected as outliers (robust runs only)."""
 
     @property
     def initial_chi2(self) -> float:
@@ -73,6 +77,8 @@ class Summary:
             "reused": list(self.reused),
             "initialization": self.initialization,
             "initialization_time": self.initialization_time,
+            "robust": self.robust,
+            "rejected_edges": list(self.rejected_edges),
             "history": [dataclasses.asdict(r) for r in self.iterations],
         }
 

@@ -1,0 +1,128 @@
+"""Graduated non-convexity with a truncated-least-squares kernel (Yang, Antonante, Tzoumas &
+Carlone 2020, "Graduated Non-Convexity for Robust Spatial Perception", Alg. 1), then a
+consistency pass.
+
+1. Solve least squares; set μ = c²/(2 s_max − c²), where the surrogate is convex.
+2. Repeat: weigh the edges by the TLS-GNC weights of their current residuals, solve the weighted
+   problem, raise μ by 1.4; until the weights are binary. Edges of weight 0 are left out of the
+   linear system (the random fill-in of false loops would dominate the cost).
+   Yang et al. solve every stage globally. Here a stage is solved twice over: warm-started from
+   the previous stage, and (SE2, SE3) from the chordal relaxation of the weighted problem; the
+   run that ends with the lower TLS objective Σ min(s, c²) is kept.
+3. Consistency: restart from the chordal relaxation of the kept (outlier-free) edges, solve least
+   squares, keep every edge with s ≤ c² at the solution, and repeat until the kept set no longer
+   changes. This re-admits true loops that an early, outlier-distorted stage had pushed out.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .chordal import chordal_values
+from .chordal import supports as supports_chordal
+from .factors import between_residuals, weighted_squares
+from .graph import PoseGraph
+from .linear import NormalEquations
+from .robust import tls_gnc_weights
+from .solvers import Result, SolverOptions
+from .solvers import optimize as solve
+
+MU_FACTOR = 1.4
+MAX_ROUNDS = 200
+MAX_CONSISTENCY_PASSES = 10
+STAGE_ITERATIONS = 10
+STAGE_RELATIVE_DECREASE = 1e-5
+
+
+@dataclasses.dataclass(frozen=True)
+class GncOutcome:
+    result: Result
+    """The final least-squares solve over the kept edges (its summary counts only that solve)."""
+    rejected: np.ndarray
+    """Indices of the between edges rejected as outliers."""
+    rounds: int
+    iterations: int
+    """Solver iterations over all stages."""
+
+
+def _squared(graph: PoseGraph, values) -> np.ndarray:
+    return weighted_squares(between_residuals(values, graph.edges), graph.edges.information)
+
+
+def _tls_objective(s: np.ndarray, mask: np.ndarray, width_sq: float) -> float:
+    return float(np.where(mask, np.minimum(s, width_sq), s).sum())
+
+
+def _stages(graph, mask, width_sq, options, start: Result, restart: bool):
+    """GNC rounds from the least-squares solution ``start``; returns (result, weights, rounds,
+    iterations)."""
+    stage = dataclasses.replace(
+        options, max_iterations=STAGE_ITERATIONS, relative_decrease=STAGE_RELATIVE_DECREASE
+    )
+    result, iterations, rounds = start, 0, 0
+    s = _squared(graph, result.values)
+    weights = np.ones(graph.num_edges)
+    largest = s[mask].max(initial=0.0)
+    if largest <= width_sq:
+        return result, weights, rounds, iterations
+    mu = width_sq / (2.0 * largest - width_sq)
+    active, system = None, None
+    while rounds < MAX_ROUNDS:
+        rounds += 1
+        weights[mask] = tls_gnc_weights(s[mask], width_sq, mu)
+        now_active = weights > 0
+        work = graph.with_edges(now_active)
+        work.edges = dataclasses.replace(
+            work.edges, information=work.edges.information * weights[now_active, None, None]
+        )
+        if active is None or not np.array_equal(now_active, active):
+            active = now_active
+            system = NormalEquations(work, work.gauge_nodes(), options.linear_solver)
+        work.set_values(chordal_values(work) if restart else result.values)
+        result = solve(work, stage, system=system)
+        iterations += result.summary.num_iterations
+        s = _squared(graph, result.values)
+        if rounds > 1 and np.all((weights[mask] < 1e-6) | (weights[mask] > 1.0 - 1e-6)):
+            break
+        mu *= MU_FACTOR
+    return result, weights, rounds, iterations
+
+
+def gnc_tls(
+    graph: PoseGraph, mask: np.ndarray, width: float, options: SolverOptions | None = None
+) -> GncOutcome:
+    """GNC-TLS over the between edges in ``mask`` (the others are trusted), from the graph's
+    values; ``width`` c is the largest inlier residual, in Mahalanobis units."""
+    options = options or SolverOptions()
+    width_sq = width**2
+    start = solve(graph, dataclasses.replace(options, relative_decrease=STAGE_RELATIVE_DECREASE))
+    iterations, rounds = start.summary.num_iterations, 0
+    best, best_objective = None, np.inf
+    for restart in (False, True) if supports_chordal(graph.group) else (False,):
+        result, weights, stage_rounds, stage_iterations = _stages(
+            graph, mask, width_sq, options, start, restart
+        )
+        rounds, iterations = rounds + stage_rounds, iterations + stage_iterations
+        objective = _tls_objective(_squared(graph, result.values), mask, width_sq)
+        if objective < best_objective:
+            best, best_objective = (result, weights), objective
+    result, weights = best
+
+    kept = ~mask | (weights > 0.5)
+    for consistency_pass in range(MAX_CONSISTENCY_PASSES):
+        work = graph.with_edges(kept)
+        if consistency_pass == 0 and supports_chordal(graph.group):
+            # The kept edges are outlier-free: restart from their chordal relaxation, which
+            # escapes a basin that an early, outlier-distorted stage may have led into.
+            work.set_values(chordal_values(work))
+        else:
+            work.set_values(result.values)
+        result = solve(work, options)
+        iterations += result.summary.num_iterations
+        consistent = ~mask | (_squared(graph, result.values) <= width_sq)
+        if np.array_equal(consistent, kept):
+            break
+        kept = consistent
+    return GncOutcome(result, np.flatnonzero(~kept), rounds, iterations)
