@@ -102,5 +102,5 @@ def tls_gnc_weights(s: np.ndarray, width_sq: float, mu: float) -> np.ndarray:
     Carlone 2020, "Graduated Non-Convexity for Robust Spatial Perception", eq. 14):
     1 for s ≤ μ c²/(μ+1), 0 for s ≥ (μ+1) c²/μ, and c √(μ(μ+1)/s) − μ between."""
     inner, outer = mu / (mu + 1.0) * width_sq, (mu + 1.0) / mu * width_sq
-    between = np.sqrt(width_sq * mu * (mu + 1.0) / np.maximum(s, 1e-300)) - mu
+    between = np.sqrt(width_sq * mu * (mu + 1.0) / np.maximum(s, inner)) - mu
     return np.where(s <= inner, 1.0, np.where(s >= outer, 0.0, between))
