@@ -37,6 +37,9 @@ EXAMPLES = {
     "eval": """examples:
   posegraph eval optimised.g2o groundtruth.tum
   posegraph eval estimate.tum groundtruth.tum --align sim3 --plot ate.png --json""",
+    "scale-drift": """examples:
+  posegraph scale-drift monocular.g2o -o corrected.tum --gt groundtruth.tum --plot drift.png
+  posegraph scale-drift monocular.g2o -o corrected.g2o --convention camera_from_world --json""",
     "bench": """examples:
   posegraph bench --graphs sphere2500 parking-garage --repeats 3""",
 }
@@ -133,6 +136,36 @@ def _parser() -> argparse.ArgumentParser:
     ev.add_argument("--align", choices=["se3", "sim3", "none"], default="se3", help="default: se3")
     ev.add_argument("--delta", type=int, default=1, help="RPE step in poses (default 1)")
     ev.add_argument("--plot", metavar="FIG.png")
+
+    drift = command(
+        "scale-drift",
+        "correct monocular scale drift: SE3 odometry + Sim3 loop closures, optimised in Sim3",
+        [common, reading],
+    )
+    drift.add_argument(
+        "input", help="g2o with SE3 odometry and EDGE_SIM3:EXPMAP loops (or all Sim3)"
+    )
+    drift.add_argument(
+        "-o", "--output", help=".tum/.kitti: corrected poses; .g2o: the optimised Sim3 graph"
+    )
+    drift.add_argument(
+        "--gt", metavar="GT", help="ground truth (TUM, KITTI or g2o) to report ATE before/after"
+    )
+    drift.add_argument(
+        "--plot", metavar="FIG.png", help="trajectories before/after (and ground truth)"
+    )
+    drift.add_argument(
+        "--scale-information",
+        type=float,
+        help="information on log-scale of the lifted SE3 edges (default: from their translation information)",
+    )
+    drift.add_argument(
+        "--convention",
+        choices=["world_from_camera", "camera_from_world"],
+        default="world_from_camera",
+        help="pose convention of the TUM/KITTI output (default world_from_camera)",
+    )
+    drift.add_argument("--overwrite", action="store_true", help="allow -o to be the input file")
 
     bench = command("bench", "time posegraph against gtsam on the benchmark graphs", [common])
     bench.add_argument("--repeats", type=int, default=3)

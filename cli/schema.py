@@ -77,6 +77,30 @@ SUMMARY = {
 }
 
 SCHEMAS = {
+    "scale-drift": {
+        "type": "object",
+        "required": [
+            "command",
+            "input",
+            "output",
+            "plot",
+            "convention",
+            "nodes",
+            "edges",
+            "scale_range",
+            "summary",
+            "ate_before",
+            "ate_after",
+        ],
+        "properties": {
+            "command": {"const": "scale-drift"},
+            "convention": {"enum": ["world_from_camera", "camera_from_world"]},
+            "scale_range": {"type": "array", "items": _NUMBER, "minItems": 2, "maxItems": 2},
+            "summary": SUMMARY,
+            "ate_before": {"type": ["number", "null"]},
+            "ate_after": {"type": ["number", "null"]},
+        },
+    },
     "optimize": {
         "type": "object",
         "required": ["command", "input", "output", "plot", "group", "nodes", "edges", "summary"],

@@ -1,4 +1,4 @@
-"""Chordal initialisation of SE2 and SE3 pose graphs (Carlone, Tron, Daniilidis & Dellaert 2015,
+"""Chordal initialisation of SE2, SE3 and Sim3 pose graphs (Carlone, Tron, Daniilidis & Dellaert 2015,
 "Initialization techniques for 3D SLAM: a survey on rotation estimation and its use in pose
 graph optimization", §IV-B and §V).
 
@@ -6,8 +6,9 @@ graph optimization", §IV-B and §V).
    residual is Rⱼ[a] − Zₑᵀ Rᵢ[a], so the problem splits into d linear least-squares problems
    sharing one sparse matrix, solved with one factorisation. Each result is projected to the
    nearest rotation (SVD).
-2. Translations, given the rotations: minimise Σₑ (tⱼ − tᵢ − Rᵢ Δtₑ)ᵀ Rᵢ Ω_tt Rᵢᵀ (…), a linear
-   least-squares problem.
+2. Sim3 only: log-scales by linear least squares, σⱼ − σᵢ = log sₑ, weighted by Ω_σσ.
+3. Translations, given rotations and scales: minimise
+   Σₑ (tⱼ − tᵢ − sᵢ Rᵢ Δtₑ)ᵀ Rᵢ Ω_tt Rᵢᵀ / sᵢ² (…), a linear least-squares problem.
 
 Any information matrix is accepted: the rotation weight wₑ is the mean eigenvalue of the
 rotation block of Ωₑ (its trace over d_rot), and the translation block Ω_tt is used whole.
@@ -20,28 +21,33 @@ from __future__ import annotations
 import numpy as np
 
 from .graph import PoseGraph
-from .lie import SE2, SE3, LieGroup
+from .lie import SE2, SE3, LieGroup, Sim3
 from .lie.so3 import project_to_rotation
 from .linear import BlockPattern, free_block_index
 
 
 def supports(group: type[LieGroup]) -> bool:
-    return group in (SE2, SE3)
+    return group in (SE2, SE3, Sim3)
 
 
-def _split(group: type[LieGroup], values: LieGroup) -> tuple[np.ndarray, np.ndarray]:
-    """(rotation matrices, translations) of SE2 or SE3 elements."""
+def _split(group: type[LieGroup], values: LieGroup) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(rotation matrices, translations, scales) of SE2, SE3 or Sim3 elements."""
     if group is SE2:
-        return values.rotation_matrix, values.translation
-    return values.rotation, values.translation
+        return values.rotation_matrix, values.translation, np.ones(values.batch_shape)
+    scale = values.scale if group is Sim3 else np.ones(values.batch_shape)
+    return values.rotation, values.translation, scale
 
 
-def _blocks(group: type[LieGroup], information: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(rotation weights (m,), translation information (m, d, d)) of (ρ, φ)-ordered matrices."""
+def _blocks(group: type[LieGroup], information: np.ndarray):
+    """(rotation weights (m,), translation information (m, d, d), log-scale weights (m,)) of
+    (ρ, φ[, σ])-ordered information matrices."""
     d = 2 if group is SE2 else 3
-    rotation = information[:, d:, d:]
+    rotation = information[
+        :, d : 2 * d if group is Sim3 else None, d : 2 * d if group is Sim3 else None
+    ]
     weights = np.trace(rotation, axis1=1, axis2=2) / rotation.shape[1]
-    return weights, information[:, :d, :d]
+    scale_weights = information[:, -1, -1] if group is Sim3 else np.zeros(len(information))
+    return weights, information[:, :d, :d], scale_weights
 
 
 def _anchors(graph: PoseGraph) -> tuple[np.ndarray, LieGroup]:
@@ -81,18 +87,22 @@ def _solve(
 
 
 def chordal_values(graph: PoseGraph) -> LieGroup:
-    """Initial values of an SE2 or SE3 graph by chordal relaxation (module docstring)."""
+    """Initial values of an SE2, SE3 or Sim3 graph by chordal relaxation (module docstring)."""
     group = graph.group
     if not supports(group):
-        raise ValueError(f"chordal initialisation handles SE2 and SE3 graphs, not {group.__name__}")
+        raise ValueError(
+            f"chordal initialisation handles SE2, SE3 and Sim3 graphs, not {group.__name__}"
+        )
     n, d = graph.num_nodes, 2 if group is SE2 else 3
     edges = graph.edges
     i, j = edges.i, edges.j
-    z, measured_translation = _split(group, edges.measurements)
-    weight, translation_information = _blocks(group, edges.information)
+    z, measured_translation, measured_scale = _split(group, edges.measurements)
+    weight, translation_information, scale_weight = _blocks(group, edges.information)
     held, held_values = _anchors(graph)
-    held_rotation, held_translation = _split(group, held_values)
-    pattern = BlockPattern(free_block_index(n, held), i, j, np.zeros(0, dtype=np.int64), d)
+    held_rotation, held_translation, held_scale = _split(group, held_values)
+    block_of = free_block_index(n, held)
+    no_priors = np.zeros(0, dtype=np.int64)
+    pattern = BlockPattern(block_of, i, j, no_priors, d)
     w = weight[:, None, None]
     eye = np.eye(d)
 
@@ -107,16 +117,30 @@ def chordal_values(graph: PoseGraph) -> LieGroup:
     rotation = project_to_rotation(rows)
     rotation[held] = held_rotation
 
-    # Translations: r = tⱼ − tᵢ − Rᵢ Δt with weight W = Rᵢ Ω_tt Rᵢᵀ; Jᵢ = −I, Jⱼ = I.
+    # Log-scales (Sim3): r = σⱼ − σᵢ − log sₑ, weighted by the σσ information (1 × 1 blocks).
+    log_scale = np.zeros(n)
+    if group is Sim3:
+        log_scale[held] = np.log(held_scale)
+        w_s = scale_weight[:, None, None]
+        r0 = (log_scale[j] - log_scale[i] - np.log(measured_scale))[:, None, None]
+        blocks = np.concatenate([w_s, w_s, -w_s, -w_s])
+        pieces = np.concatenate([-w_s * r0, w_s * r0])
+        log_scale += _solve(BlockPattern(block_of, i, j, no_priors, 1), blocks, pieces, n)[:, 0, 0]
+    scale = np.exp(log_scale)
+
+    # Translations: r = tⱼ − tᵢ − sᵢ Rᵢ Δt with weight W = Rᵢ Ω_tt Rᵢᵀ / sᵢ² (the between
+    # residual's translation is Rᵢᵀ (tⱼ − tᵢ)/sᵢ − Δt); Jᵢ = −I, Jⱼ = I.
     world = rotation[i] @ translation_information @ np.swapaxes(rotation[i], 1, 2)
+    world = world / scale[i, None, None] ** 2
     translation = np.zeros((n, d))
     translation[held] = held_translation
-    r0 = (
-        translation[j] - translation[i] - np.einsum("mab,mb->ma", rotation[i], measured_translation)
-    )
+    offsets = scale[i, None] * np.einsum("mab,mb->ma", rotation[i], measured_translation)
+    r0 = translation[j] - translation[i] - offsets
     weighted = np.einsum("mab,mb->ma", world, r0)[:, :, None]
     blocks = np.concatenate([world, world, -world, -world])
     translation += _solve(pattern, blocks, np.concatenate([-weighted, weighted]), n)[:, :, 0]
     if group is SE2:
         return SE2(np.arctan2(rotation[:, 1, 0], rotation[:, 0, 0]), translation)
+    if group is Sim3:
+        return Sim3(rotation, translation, scale)
     return SE3(rotation, translation)

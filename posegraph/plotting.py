@@ -108,10 +108,15 @@ def plot_graphs(
 
 
 def plot_trajectories(
-    trajectories: list[tuple[str, np.ndarray]], path: str, title: str | None = None
+    trajectories: list[tuple[str, np.ndarray]],
+    path: str,
+    title: str | None = None,
+    view: str = "auto",
 ) -> None:
-    """Overlay trajectories given as (label, (N, 3) positions); 3D unless all are planar."""
-    three_d = any(np.ptp(p[:, 2]) > 1e-9 for _, p in trajectories)
+    """Overlay trajectories given as (label, (N, 3) positions); with ``view="auto"``, 3D unless
+    all are planar."""
+    planar = all(np.ptp(p[:, 2]) <= 1e-9 for _, p in trajectories)
+    three_d = view == "3d" or (view == "auto" and not planar)
     figure, axes = _new_axes(three_d)
     for k, (label, positions) in enumerate(trajectories):
         _draw(axes, three_d, positions, None, COLORS[k % len(COLORS)], label)

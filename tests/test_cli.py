@@ -259,3 +259,22 @@ def test_every_command_succeeds_on_the_benchmark_graphs(tmp_path, shared_dataset
     assert_not_blank(tmp_path / "g.png")
     document = run_json("optimize", source, "-o", tmp_path / "opt.g2o")
     assert document["summary"]["final_error"] <= document["summary"]["initial_error"]
+
+
+def test_scale_drift_command(tmp_path):
+    from posegraph_datasets.monocular import monocular_sequence, write_sequence
+
+    source, truth = tmp_path / "mono.g2o", tmp_path / "gt.tum"
+    write_sequence(monocular_sequence(drift=0.01, seed=0), str(source), str(truth))
+    out, figure = tmp_path / "corrected.tum", tmp_path / "drift.png"
+    document = run_json("scale-drift", source, "-o", out, "--gt", truth, "--plot", figure)
+    assert document["ate_after"] * 10 <= document["ate_before"]
+    assert document["scale_range"][0] < 0.5 < document["scale_range"][1] == 1.0
+    assert_not_blank(figure)
+    corrected = np.loadtxt(out)
+    assert corrected.shape == (300, 8)
+    evaluated = run_json("eval", out, truth)
+    assert evaluated["ate"]["rmse"] == pytest.approx(document["ate_after"], rel=1e-9)
+    camera_from_world = tmp_path / "cw.tum"
+    run("scale-drift", source, "-o", camera_from_world, "--convention", "camera_from_world")
+    assert not np.allclose(np.loadtxt(camera_from_world)[:, 1:4], corrected[:, 1:4])

@@ -9,6 +9,8 @@ import numpy as np
 
 from ..graph import PoseGraph
 from ..initialization import spanning_tree_values
+from ..lie import SE3, Sim3
+from ..lifting import default_scale_information, lift_information, lift_se3
 from .errors import GraphFileError
 from .parsing import LineChecker, Rows, read_lines, to_rows
 from .tags import G2O_TAGS, TORO_TAGS, TagFormat
@@ -25,10 +27,15 @@ class ReadOptions:
             stopping at the first.
         g2o_rotation_information: read SE3 information the way g2o itself weighs it
             (Λ_φφ = Λ_qq/4, Λ_ρφ = Λ_ρq/2) instead of as-is over (ρ, φ) like gtsam.
+        scale_information: see below.
     """
 
     lenient: bool = False
     g2o_rotation_information: bool = False
+    scale_information: float | None = None
+    """For files mixing SE3 and Sim3 lines (monocular odometry plus Sim3 loop closures): the SE3
+    lines are lifted to Sim3 with scale 1 and this information on log-scale (None:
+    ``posegraph.lifting.default_scale_information`` of the SE3 edges)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -58,6 +65,32 @@ class _Collected:
     priors: list = dataclasses.field(default_factory=list)
     fixes: list = dataclasses.field(default_factory=list)  # rows
     equivalences: list = dataclasses.field(default_factory=list)  # rows
+
+
+def _lift_se3_records(collected: _Collected, scale_information: float | None) -> None:
+    """Turn SE3 vertices, edges and priors into Sim3 ones of scale 1 (CONVENTIONS.md: both
+    files' vertices are world-from-node, so no inversion is involved)."""
+    if scale_information is None:
+        se3_edges = [(z, info) for _, z, info in collected.edges if isinstance(z, SE3)]
+        scale_information = default_scale_information(
+            np.concatenate([info for _, info in se3_edges]) if se3_edges else np.zeros((0, 6, 6)),
+            SE3.concatenate([z for z, _ in se3_edges]) if se3_edges else SE3.identity((0,)),
+        )
+    collected.vertices = [
+        (rows, lift_se3(values) if isinstance(values, SE3) else values)
+        for rows, values in collected.vertices
+    ]
+    for kind in ("edges", "priors"):
+        setattr(
+            collected,
+            kind,
+            [
+                (rows, lift_se3(z), lift_information(info, scale_information))
+                if isinstance(z, SE3)
+                else (rows, z, info)
+                for rows, z, info in getattr(collected, kind)
+            ],
+        )
 
 
 def _check_information(rows: Rows, measurements, information, checker: LineChecker):
@@ -128,6 +161,8 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
                 first_line_of_group.get(group, entries[0][0]), entries[0][0]
             )
     groups = set(first_line_of_group)
+    if groups == {SE3, Sim3}:  # SE3 odometry with Sim3 loop closures: one Sim3 graph
+        groups = {Sim3}
     if len(groups) > 1:
         in_order = sorted(groups, key=first_line_of_group.get)
         names = " and ".join(g.__name__ for g in in_order)
@@ -146,6 +181,8 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
         if rows is not None:
             _convert(tag, spec, rows, options, checker, collected)
 
+    if group is Sim3:
+        _lift_se3_records(collected, options.scale_information)
     graph, without_vertex = _assemble(group, collected, checker)
     tag_counts = Counter()
     for rows, *_ in collected.vertices + collected.edges + collected.priors:

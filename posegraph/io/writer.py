@@ -50,6 +50,22 @@ def _sim3_numbers(element: Sim3, dialect: str) -> np.ndarray:
     return sim3_to_g2o_tangent(element)
 
 
+def sim3_edge_lines(
+    i_ids: np.ndarray,
+    j_ids: np.ndarray,
+    measurements: Sim3,
+    information: np.ndarray,
+    dialect: str = "a",
+) -> list[str]:
+    """EDGE_SIM3:EXPMAP lines for edges i → j with our measurements (g2o's Z is their inverse,
+    which dialect (b) writes as its log, so that is our element's log)."""
+    if dialect not in ("a", "b"):
+        raise ValueError(f"Sim3 dialect is 'a' or 'b', not {dialect!r}")
+    measured = measurements.inverse() if dialect == "a" else measurements
+    numbers = np.hstack([_sim3_numbers(measured, dialect), sim3_information_to_file(information)])
+    return _lines("EDGE_SIM3:EXPMAP", [i_ids, j_ids], numbers)
+
+
 def format_g2o(
     graph: PoseGraph, g2o_rotation_information: bool = False, sim3_dialect: str = "a"
 ) -> str:

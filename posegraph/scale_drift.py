@@ -1,0 +1,138 @@
+"""Sim(3) scale-drift correction of a monocular trajectory (Strasdat, Montiel & Davison 2010,
+"Scale Drift-Aware Large Scale Monocular SLAM"; ORB-SLAM's essential-graph optimisation).
+
+A monocular trajectory is an SE3 pose graph whose translations drift in scale. Lifted to Sim3
+(every pose and odometry edge gets scale 1, with a configurable information on log-scale) and
+given loop closures that carry their measured Sim3 (relative scale included), one Sim3
+optimisation spreads the scale correction along the loops. Mapping back keeps each pose's
+rotation and takes its corrected position; the per-pose scale is returned too.
+
+Pose conventions are explicit: ``"world_from_camera"`` poses are T_w_c (x_w = R x_c + t; the
+camera centre is t), ``"camera_from_world"`` poses are T_c_w. Edges always measure T_i_j, the pose
+of node j in the frame of node i (``PoseGraph``'s between convention). Internally nodes are
+world-from-camera: a node's Sim3 S_w_c maps camera coordinates in its local map's scale to the
+world, so its SE3 pose is (R, t) and its scale s says how the local map's units relate to the
+world's.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .api import optimize
+from .graph import PoseGraph
+from .lie import SE3, Sim3
+from .lifting import default_scale_information, lift_information, lift_se3
+from .solvers import Result, SolverOptions
+
+CONVENTIONS = ("world_from_camera", "camera_from_world")
+
+
+def _check_convention(convention: str) -> None:
+    if convention not in CONVENTIONS:
+        raise ValueError(f"pose convention is one of {', '.join(CONVENTIONS)}, not {convention!r}")
+
+
+def lift_graph(graph: PoseGraph, scale_information: float | None = None) -> PoseGraph:
+    """An SE3 graph as a Sim3 graph: nodes, edges and priors get scale 1 and σ-information
+    ``scale_information`` (None: ``default_scale_information`` of the edges); fixed nodes stay
+    fixed (and so fix the scale gauge)."""
+    if graph.group is not SE3:
+        raise ValueError(f"lift_graph takes an SE3 graph, not {graph.group.__name__}")
+    if scale_information is None:
+        scale_information = default_scale_information(
+            graph.edges.information, graph.edges.measurements
+        )
+    lifted = PoseGraph(Sim3)
+    lifted.add_nodes(graph.node_ids, lift_se3(graph.values))
+    ids = graph.node_ids
+    lifted.add_edges(
+        ids[graph.edges.i],
+        ids[graph.edges.j],
+        lift_se3(graph.edges.measurements),
+        lift_information(graph.edges.information, scale_information),
+    )
+    if len(graph.priors):
+        lifted.add_priors(
+            ids[graph.priors.i],
+            lift_se3(graph.priors.measurements),
+            lift_information(graph.priors.information, scale_information),
+        )
+    lifted.fixed = graph.fixed.copy()
+    return lifted
+
+
+def convert_convention(poses: SE3, convention: str) -> SE3:
+    """World-from-camera poses in ``convention``, or poses in ``convention`` as world-from-camera:
+    T_c_w = T_w_c⁻¹ either way (the conversion is its own inverse)."""
+    _check_convention(convention)
+    return poses if convention == "world_from_camera" else poses.inverse()
+
+
+def sim3_to_se3(values: Sim3, convention: str = "world_from_camera") -> SE3:
+    """Corrected SE3 poses of Sim3 nodes S_w_c: the rotation is kept and the position is the
+    similarity's translation (the camera centre); returned in ``convention``."""
+    return convert_convention(SE3(values.rotation, values.translation), convention)
+
+
+@dataclasses.dataclass(frozen=True)
+class ScaleDriftCorrection:
+    """The corrected trajectory (in the convention asked for), per-pose scales, the optimised
+    Sim3 graph and the optimisation result."""
+
+    poses: SE3
+    scales: np.ndarray
+    node_ids: np.ndarray
+    graph: PoseGraph
+    result: Result
+    convention: str
+
+
+def correct_scale_drift(
+    graph: PoseGraph,
+    scale_information: float | None = None,
+    convention: str = "world_from_camera",
+    options: SolverOptions | None = None,
+    init: str = "auto",
+) -> ScaleDriftCorrection:
+    """Correct the scale drift of a graph: an SE3 graph is lifted first (then it needs
+    Sim3 loop closures added to gain anything); a Sim3 graph, such as a g2o file of SE3
+    odometry plus EDGE_SIM3 loops read by ``read_graph``, is optimised as it is.
+
+    ``convention`` names how the returned ``poses`` are expressed. ``init`` is the initialisation
+    (default "auto": chordal relaxation of rotations, log-scales and translations when the graph
+    has loops, which copes with drift that dead reckoning cannot start from).
+    """
+    _check_convention(convention)
+    sim3 = lift_graph(graph, scale_information) if graph.group is SE3 else graph.copy()
+    if sim3.group is not Sim3:
+        raise ValueError(
+            f"scale-drift correction needs an SE3 or Sim3 graph, not {graph.group.__name__}"
+        )
+    result = optimize(sim3, init=init, options=options)
+    sim3.set_values(result.values)
+    return ScaleDriftCorrection(
+        poses=sim3_to_se3(result.values, convention),
+        scales=np.asarray(result.values.scale).copy(),
+        node_ids=sim3.node_ids.copy(),
+        graph=sim3,
+        result=result,
+        convention=convention,
+    )
+
+
+def add_sim3_loops(
+    graph: PoseGraph,
+    i_ids,
+    j_ids,
+    measurements: Sim3,
+    information: np.ndarray,
+    scale_information: float | None = None,
+) -> PoseGraph:
+    """The graph lifted to Sim3 (if it is SE3) with loop closures i → j of measured Sim3
+    T_i_j (relative scale s_j / s_i of the two local maps) added."""
+    sim3 = lift_graph(graph, scale_information) if graph.group is SE3 else graph.copy()
+    sim3.add_edges(i_ids, j_ids, measurements, information)
+    return sim3
