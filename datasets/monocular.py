@@ -22,6 +22,7 @@ import dataclasses
 
 import numpy as np
 
+from posegraph.evaluation import evaluate
 from posegraph.graph import PoseGraph
 from posegraph.io.atomic import atomic_write_text
 from posegraph.io.writer import format_g2o, sim3_edge_lines
@@ -53,6 +54,12 @@ class MonocularSequence:
             self.loop_information,
             scale_information,
         )
+
+    def ate(self, poses: SE3) -> float:
+        """ATE RMSE of world-from-camera ``poses`` against the ground truth, SE3-aligned (no
+        scale fitting)."""
+        keys = self.odometry.node_ids.astype(float)
+        return evaluate(Trajectory(keys, poses), Trajectory(keys, self.truth), "se3").ate.rmse
 
     def se3_graph(self) -> PoseGraph:
         """The odometry and the loops as SE3 (rotation and translation, scale dropped): what an

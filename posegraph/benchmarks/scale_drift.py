@@ -13,9 +13,7 @@ import argparse
 from posegraph_datasets.monocular import monocular_sequence
 
 from ..api import optimize
-from ..evaluation import evaluate
 from ..scale_drift import correct_scale_drift
-from ..trajectory_io import Trajectory
 
 
 def run(drifts: list[float], seeds: list[int], plot: str | None = None) -> str:
