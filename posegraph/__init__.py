@@ -6,6 +6,8 @@ from .api import optimize
 from .graph import PoseGraph
 from .io import GraphFileError, ReadOptions, read_graph, write_graph
 from .lie import SE2, SE3, SO2, SO3, Sim3
+from .marginals import marginals
+from .scale_drift import correct_scale_drift
 from .solvers import Result, SolverOptions
 
 try:
@@ -24,6 +26,8 @@ __all__ = [
     "Result",
     "Sim3",
     "SolverOptions",
+    "correct_scale_drift",
+    "marginals",
     "optimize",
     "read_graph",
     "write_graph",

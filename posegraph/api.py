@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
@@ -9,12 +10,14 @@ import numpy as np
 from .factors import between_residuals, weighted_squares
 from .gnc import gnc_tls
 from .graph import PoseGraph
-from .initialization import choose, initialize, odometry_mask
+from .initialization import choose, initialize, odometry_mask, spanning_tree_values
 from .robust import Robustifier, RobustKernel, default_width
 from .solvers import Callback, Result, SolverOptions
 from .solvers import optimize as solve
 
 ROBUST_EDGE_CLASSES = ("loops", "all")
+LOCAL_RELATIVE_DECREASE = 1e-4
+"""Tolerance of the warm start's refinement of new nodes (the full solve follows)."""
 GNC_QUANTILE = 0.999
 """Default TLS threshold: an inlier's s = rᵀΩr exceeds √χ²_dof(0.999) once in a thousand."""
 KERNEL_QUANTILE = 0.95
@@ -39,10 +42,16 @@ def optimize(
     robust: str | None = None,
     robust_edges: str = "loops",
 ) -> Result:
-    """Initialise the graph's values by ``init``, then minimise its cost.
+    """Initialise the graph's values by ``init``, minimise its cost, and leave the solution in
+    the graph (``graph.values``), so that calling again after adding nodes and edges warm-starts.
 
-    ``init``: see ``posegraph.initialization.initialize``; "auto" picks chordal relaxation for
+    ``init``: see ``posegraph.initialization.initialize``. "auto" warm-starts a graph that was
+    optimised before: its nodes keep their values, and nodes added since without values are
+    composed from them along a spanning tree and refined alone, the solved nodes held. On a
+    fresh graph it picks chordal relaxation for
     graphs with loops, or odometry when ``robust`` is set (the odometry chain is trusted).
+    While the structure is unchanged, the sparsity pattern and symbolic factorisation of the
+    last call are reused; ``summary.reused`` says what was.
     ``robust``: None for least squares; "gnc" for graduated non-convexity with a truncated
     least-squares kernel (``posegraph.gnc``); or a kernel "huber", "cauchy", "geman-mcclure",
     "tukey", "dcs"; each optionally ":WIDTH" in Mahalanobis units (default ``GNC_QUANTILE`` or
@@ -53,15 +62,28 @@ def optimize(
     """
     options = options or SolverOptions()
     start = time.perf_counter()
-    if init == "auto":
+    reused = []
+    if init == "auto" and graph.optimized:
+        init = "warm start"
+        reused.append(f"previous solution ({int(graph.initialized.sum())} nodes)")
+        if not graph.initialized.all():
+            _initialize_new_nodes(graph, options)
+    elif init == "auto":
         init = "odometry" if robust else choose(graph)
-    if init != "file":
+    if init not in ("file", "warm start"):
         graph.set_values(initialize(graph, init))
+    elif not graph.initialized.all():
+        missing = graph.node_ids[~graph.initialized][:5].tolist()
+        raise ValueError(f"nodes {missing} have no values; add them with values or use init='auto'")
     init_time = time.perf_counter() - start
 
     rejected = np.zeros(0, dtype=np.int64)
     if robust is None:
-        result = solve(graph, options, callback)
+        system = _cached_system(graph, options)
+        if system is not None:
+            reused += ["sparsity pattern", "symbolic factorization"]
+        result = solve(graph, options, callback, system=system)
+        graph.normal_equations = (_structure_key(graph, options), result.system)
     else:
         mask = robust_mask(graph, robust_edges)
         name, _, width_text = robust.partition(":")
@@ -83,5 +105,37 @@ def optimize(
         result.summary.rejected_edges = rejected.tolist()
     result.summary.initialization = init
     result.summary.initialization_time = init_time
+    result.summary.reused = reused
     result.summary.total_time = time.perf_counter() - start
+    graph.set_values(result.values)
+    graph.optimized = True
     return result
+
+
+def _initialize_new_nodes(graph: PoseGraph, options: SolverOptions) -> None:
+    """Values for nodes added since the last solution: compose them from solved neighbours along
+    a spanning tree, then refine them alone (solved nodes held) over the edges that touch them,
+    so that the full solve starts close to its optimum."""
+    new = ~graph.initialized
+    local = graph.with_edges(new[graph.edges.i] | new[graph.edges.j])
+    local.fixed = ~new
+    local.priors = local.priors.subset(new[local.priors.i])
+    local.set_values(spanning_tree_values(local, known=~new))
+    # The local problem is small: SuperLU's start-up is cheaper than CHOLMOD's.
+    local_options = dataclasses.replace(
+        options, relative_decrease=LOCAL_RELATIVE_DECREASE, linear_solver="scipy"
+    )
+    refined = solve(local, local_options)
+    graph.set_values(refined.values)
+
+
+def _structure_key(graph: PoseGraph, options: SolverOptions) -> tuple:
+    return (graph.structure_version, options.linear_solver)
+
+
+def _cached_system(graph: PoseGraph, options: SolverOptions):
+    """The last call's normal equations, if the graph's structure has not changed since."""
+    if graph.normal_equations is None:
+        return None
+    key, system = graph.normal_equations
+    return system if key == _structure_key(graph, options) else None

@@ -65,6 +65,12 @@ class PoseGraph:
         self.edges = EdgeSet.empty(group)
         self.priors = EdgeSet.empty(group)
         self.fixed = np.zeros(0, dtype=bool)
+        self.initialized = np.zeros(0, dtype=bool)
+        """Which nodes have values (nodes added without one get them when optimised)."""
+        self.optimized = False
+        """Whether ``posegraph.optimize`` left its solution in ``values`` (warm starts)."""
+        self.normal_equations = None
+        """The last optimisation's ``NormalEquations`` and the structure it was built for."""
         self.equivalences = np.zeros((0, 2), dtype=np.int64)
         """TORO ``EQUIV`` pairs of node ids: kept for round trips, not constraints (as gtsam)."""
         self._index_of: dict[int, int] = {}
@@ -101,15 +107,38 @@ class PoseGraph:
         """The current values of some nodes, stacked in the order given."""
         return self.values[self.index(node_ids)]
 
+    def matrices(self, node_ids=None) -> np.ndarray:
+        """(k, n, n) matrices of the values of ``node_ids`` (all nodes if None)."""
+        values = self.values if node_ids is None else self.values_of(node_ids)
+        return values.as_matrix()
+
+    def positions(self, node_ids=None) -> np.ndarray:
+        """(k, 2 or 3) translations of the values of ``node_ids`` (all nodes if None)."""
+        values = self.values if node_ids is None else self.values_of(node_ids)
+        return np.array(values.translation)
+
+    def _elements(self, values, count: int) -> LieGroup:
+        """The group's elements from elements or (…, n, n) matrices, broadcast to ``count``."""
+        if isinstance(values, LieGroup):
+            if not isinstance(values, self.group):
+                raise TypeError(
+                    f"values are {type(values).__name__}, the graph is {self.group.__name__}"
+                )
+        else:
+            values = self.group.from_matrix(np.asarray(values, float))
+        return values if values.batch_shape == (count,) else values.broadcast_to((count,))
+
     # ------------------------------------------------------------------------ growth
-    def add_nodes(self, node_ids, values: LieGroup) -> np.ndarray:
-        """Add nodes with initial values; returns their indices. Ids must be new and unique."""
+    def add_nodes(self, node_ids, values: LieGroup | np.ndarray | None = None) -> np.ndarray:
+        """Add nodes (ids must be new and unique); returns their indices.
+
+        ``values`` are group elements or (k, n, n) matrices. Without values, the nodes are
+        initialised when the graph is optimised, by composing measurements from nodes that have
+        values (as a back end adds a pose with only its odometry edge).
+        """
         ids = np.atleast_1d(np.asarray(node_ids, dtype=np.int64))
-        values = values.broadcast_to(ids.shape) if values.batch_shape != ids.shape else values
-        if not isinstance(values, self.group):
-            raise TypeError(
-                f"values are {type(values).__name__}, the graph is {self.group.__name__}"
-            )
+        has_values = values is not None
+        values = self._elements(values, ids.size) if has_values else self.group.identity(ids.shape)
         unique, counts = np.unique(ids, return_counts=True)
         if np.any(counts > 1):
             raise ValueError(f"node id {unique[counts > 1][0]} is given twice")
@@ -122,25 +151,28 @@ class PoseGraph:
         self.node_ids = np.concatenate([self.node_ids, ids])
         self.values = self.group.concatenate([self.values, values])
         self.fixed = np.concatenate([self.fixed, np.zeros(ids.size, dtype=bool)])
+        self.initialized = np.concatenate([self.initialized, np.full(ids.size, has_values)])
         self.structure_version += 1
         return indices
 
-    def _edge_set(self, i_ids, j_ids, measurements: LieGroup, information) -> EdgeSet:
+    def add_node(self, node_id: int, value: LieGroup | np.ndarray | None = None) -> int:
+        """Add one node (see ``add_nodes``); returns its index."""
+        return int(
+            self.add_nodes([node_id], value if value is None else self._elements(value, 1))[0]
+        )
+
+    def _edge_set(self, i_ids, j_ids, measurements, information) -> EdgeSet:
         i = self.index(i_ids)
         j = self.index(j_ids)
         count = i.size
-        if not isinstance(measurements, self.group):
-            raise TypeError(
-                f"measurements are {type(measurements).__name__}, the graph is "
-                f"{self.group.__name__}"
-            )
-        measurements = measurements.broadcast_to((count,))
+        measurements = self._elements(measurements, count)
         d = self.group.dof
         information = np.broadcast_to(np.asarray(information, float), (count, d, d)).copy()
         return EdgeSet(i, j, measurements, information)
 
-    def add_edges(self, i_ids, j_ids, measurements: LieGroup, information) -> np.ndarray:
-        """Add between edges i → j measuring Z ≈ Xᵢ⁻¹ Xⱼ; returns their edge indices."""
+    def add_edges(self, i_ids, j_ids, measurements, information) -> np.ndarray:
+        """Add between edges i → j measuring Z ≈ Xᵢ⁻¹ Xⱼ (elements or (k, n, n) matrices) with
+        (k, d, d) or one (d, d) information; returns their edge indices."""
         new = self._edge_set(i_ids, j_ids, measurements, information)
         if np.any(new.i == new.j):
             raise ValueError(f"self-loop on node {self.node_ids[new.i[new.i == new.j][0]]}")
@@ -149,7 +181,11 @@ class PoseGraph:
         self.structure_version += 1
         return np.arange(start, start + len(new))
 
-    def add_priors(self, node_ids, measurements: LieGroup, information) -> np.ndarray:
+    def add_edge(self, i_id: int, j_id: int, measurement, information) -> int:
+        """Add one between edge (see ``add_edges``); returns its index."""
+        return int(self.add_edges([i_id], [j_id], measurement, information)[0])
+
+    def add_priors(self, node_ids, measurements, information) -> np.ndarray:
         """Add priors Z ≈ Xᵢ; returns their prior indices."""
         new = self._edge_set(node_ids, node_ids, measurements, information)
         start = len(self.priors)
@@ -164,6 +200,10 @@ class PoseGraph:
         other.structure_version += 1
         return other
 
+    def add_prior(self, node_id: int, measurement, information) -> int:
+        """Add one prior (see ``add_priors``); returns its index."""
+        return int(self.add_priors([node_id], measurement, information)[0])
+
     def remove_edges(self, edge_indices) -> None:
         """Remove between edges by index (indices of later edges shift down)."""
         keep = np.ones(self.num_edges, dtype=bool)
@@ -177,10 +217,11 @@ class PoseGraph:
         self.structure_version += 1
 
     def set_values(self, values: LieGroup) -> None:
-        """Replace all node values (batch shape (num_nodes,))."""
+        """Replace all node values (batch shape (num_nodes,)); every node then has a value."""
         if values.batch_shape != (self.num_nodes,):
             raise ValueError(f"expected {self.num_nodes} values, got {values.batch_shape}")
         self.values = values
+        self.initialized = np.ones(self.num_nodes, dtype=bool)
 
     def copy(self) -> PoseGraph:
         """An independent copy (arrays are copied on the next change, never shared in place)."""
@@ -190,6 +231,8 @@ class PoseGraph:
         other.edges = self.edges
         other.priors = self.priors
         other.fixed = self.fixed.copy()
+        other.initialized = self.initialized.copy()
+        other.optimized = self.optimized
         other.equivalences = self.equivalences.copy()
         other._index_of = dict(self._index_of)
         other.structure_version = self.structure_version

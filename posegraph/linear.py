@@ -36,6 +36,7 @@ class BlockPattern:
         prior_i: np.ndarray,
         d: int,
         backend: str = "auto",
+        for_covariance: bool = False,
     ) -> None:
         self.d = d
         self.block_of = block_of
@@ -90,7 +91,7 @@ class BlockPattern:
         self._vector_positions = np.concatenate(
             [vector_positions(a), vector_positions(b), vector_positions(p)]
         )
-        self.cholesky = make_cholesky(self.indices, self.indptr, self.size, backend)
+        self.cholesky = make_cholesky(self.indices, self.indptr, self.size, backend, for_covariance)
 
     @property
     def nnz(self) -> int:
@@ -132,11 +133,25 @@ def free_block_index(num_nodes: int, held: np.ndarray) -> np.ndarray:
 class NormalEquations(BlockPattern):
     """H = Σ Jᵀ Ω J and g = Σ Jᵀ Ω r of a pose graph over its free nodes (held ones eliminated)."""
 
-    def __init__(self, graph: PoseGraph, held: np.ndarray, backend: str = "auto") -> None:
+    def __init__(
+        self,
+        graph: PoseGraph,
+        held: np.ndarray,
+        backend: str = "auto",
+        for_covariance: bool = False,
+    ) -> None:
         self.dof = graph.group.dof
         block_of = free_block_index(graph.num_nodes, held)
         self.free_nodes = np.flatnonzero(block_of >= 0)
-        super().__init__(block_of, graph.edges.i, graph.edges.j, graph.priors.i, self.dof, backend)
+        super().__init__(
+            block_of,
+            graph.edges.i,
+            graph.edges.j,
+            graph.priors.i,
+            self.dof,
+            backend,
+            for_covariance,
+        )
 
     def assemble(
         self,

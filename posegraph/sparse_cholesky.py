@@ -25,10 +25,15 @@ class CholmodCholesky:
 
     name = "cholmod"
 
-    def __init__(self, indices: np.ndarray, indptr: np.ndarray, size: int) -> None:
+    def __init__(
+        self, indices: np.ndarray, indptr: np.ndarray, size: int, supernodal: bool = False
+    ) -> None:
+        """``supernodal`` forces an LLᵀ factor (CHOLMOD may otherwise pick LDLᵀ), which
+        ``covariance_blocks`` needs."""
         from cvxopt import cholmod, matrix, spmatrix
 
-        self._cholmod, self._matrix = cholmod, matrix
+        self._cholmod, self._matrix, self._spmatrix = cholmod, matrix, spmatrix
+        self.size = size
         columns = np.repeat(np.arange(size), np.diff(indptr))
         self._a = spmatrix(
             matrix(np.ones(indices.size)), matrix(indices), matrix(columns), (size, size)
@@ -43,9 +48,31 @@ class CholmodCholesky:
             raise NotPositiveDefinite(str(error)) from None
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
+        """Solve for a vector (n,) or for every column of (n, k) at once."""
         b = self._matrix(np.ascontiguousarray(rhs, float))
         self._cholmod.solve(self._factor, b)
-        return np.frombuffer(b, dtype=float).copy()
+        return np.array(b).reshape(np.shape(rhs))
+
+    def covariance_blocks(self, groups: list[np.ndarray]) -> list[np.ndarray]:
+        """Blocks (A⁻¹)[g, g] for groups g of columns. With P A Pᵀ = L Lᵀ (supernodal factor),
+        A⁻¹ = Pᵀ L⁻ᵀ L⁻¹ P, so the block is Yᵀ Y with Y = L⁻¹ P E_g: sparse solves with the
+        unit columns, whose solutions are sparse (the elimination-tree path of each column)."""
+        import scipy.sparse
+
+        columns = np.concatenate(groups)
+        unit = self._spmatrix(
+            1.0, columns.tolist(), list(range(columns.size)), (self.size, columns.size)
+        )
+        y = self._cholmod.spsolve(self._factor, unit, sys=7)  # P
+        y = self._cholmod.spsolve(self._factor, y, sys=4)  # L⁻¹
+        rows, cols = np.array(y.I).ravel(), np.array(y.J).ravel()
+        y = scipy.sparse.csc_matrix((np.array(y.V).ravel(), (rows, cols)), shape=y.size)
+        blocks, start = [], 0
+        for group in groups:
+            part = y[:, start : start + group.size]
+            blocks.append((part.T @ part).toarray())
+            start += group.size
+        return blocks
 
 
 class ScipyCholesky:
@@ -93,6 +120,15 @@ class ScipyCholesky:
         x[self._order] = self._lu.solve(rhs[self._order])
         return x
 
+    def covariance_blocks(self, groups: list[np.ndarray]) -> list[np.ndarray]:
+        """Blocks (A⁻¹)[g, g], by solving for the unit columns of each group."""
+        blocks = []
+        for group in groups:
+            unit = np.zeros((self._size, group.size))
+            unit[group, np.arange(group.size)] = 1.0
+            blocks.append(self.solve(unit)[group])
+        return blocks
+
 
 BACKENDS = {"cholmod": CholmodCholesky, "scipy": ScipyCholesky}
 
@@ -110,8 +146,15 @@ def available_backends() -> list[str]:
     return names
 
 
-def make_cholesky(indices: np.ndarray, indptr: np.ndarray, size: int, backend: str = "auto"):
-    """A factoriser for the symmetric CSC pattern (both triangles stored, sorted indices)."""
+def make_cholesky(
+    indices: np.ndarray,
+    indptr: np.ndarray,
+    size: int,
+    backend: str = "auto",
+    for_covariance: bool = False,
+):
+    """A factoriser for the symmetric CSC pattern (both triangles stored, sorted indices);
+    ``for_covariance`` prepares it for ``covariance_blocks``."""
     if backend == "auto":
         backend = available_backends()[0]
     if backend not in BACKENDS:
@@ -119,4 +162,6 @@ def make_cholesky(indices: np.ndarray, indptr: np.ndarray, size: int, backend: s
         raise ValueError(f"unknown sparse Cholesky backend {backend!r}; choose from {choices}")
     if backend not in available_backends():
         raise ValueError(f"backend {backend!r} is not available here (is cvxopt installed?)")
-    return BACKENDS[backend](indices, indptr, size)
+    if backend == "cholmod":
+        return CholmodCholesky(indices, indptr, size, supernodal=for_covariance)
+    return ScipyCholesky(indices, indptr, size)

@@ -95,6 +95,7 @@ def optimize(
         system = NormalEquations(graph, graph.gauge_nodes(), options.linear_solver)
     else:
         reused = ["sparsity pattern", "symbolic factorization"]
+
     clock.lap("other")
     current = _Linearized(graph, graph.values, weighting)
     clock.lap("linearize")
@@ -152,6 +153,19 @@ def optimize(
             clock.lap("factorize")
             step, step_ok = np.zeros_like(gradient), False
 
+        damping_share = (
+            np.max(lam * scale / np.maximum(diagonal, options.min_diagonal)) if lm else 0.0
+        )
+        predicted = 0.5 * float(step @ ((lam * scale * step if lm else 0.0) - gradient))
+        if (
+            step_ok
+            and damping_share < 1e-3
+            and 0 <= predicted <= options.relative_decrease * current.error
+        ):
+            # A (near) Gauss-Newton step whose quadratic model promises less than the tolerance:
+            # stop without spending a linearisation on evaluating it.
+            termination, converged = "predicted error decrease below tolerance", True
+            break
         trial = None
         if step_ok:
             trial_values = current.values.retract(system.scatter(step, graph.num_nodes))
@@ -162,7 +176,6 @@ def optimize(
         decrease = current.error - trial.error if accepted else 0.0
         if accepted:
             if lm:
-                predicted = 0.5 * float(step @ (lam * scale * step - gradient))
                 rho = decrease / predicted if predicted > 0 else 0.0
                 lam *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
                 nu = 2.0
@@ -228,4 +241,4 @@ def _result(
         num_variables=system.size,
         reused=reused,
     )
-    return Result(current.values, summary)
+    return Result(current.values, summary, system)

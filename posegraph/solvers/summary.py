@@ -89,6 +89,8 @@ class Result:
 
     values: LieGroup
     summary: Summary
+    system: object = dataclasses.field(default=None, repr=False, compare=False)
+    """The ``NormalEquations`` used (pattern and symbolic factorisation), for reuse."""
 
     def values_of(self, graph, node_ids) -> LieGroup:
         """The optimised values of some nodes of ``graph``."""
