@@ -1,0 +1,120 @@
+"""The library API a SLAM back end uses: editing, warm starts, reuse, marginal covariances."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from posegraph_datasets.generators import manhattan_world
+
+import posegraph
+from posegraph.benchmarks.incremental import stream
+from posegraph.factors import linearize_between, linearize_priors
+from posegraph.graph import PoseGraph
+from posegraph.lie import SE2, SE3
+from posegraph.linear import NormalEquations
+
+from .conftest import random_graph
+
+
+def test_batch_and_single_editing_with_arrays():
+    graph = PoseGraph(SE3)
+    values = SE3.exp(np.random.default_rng(80).normal(size=(4, 6)))
+    graph.add_nodes([7, 3, 9], values[:3].as_matrix())  # matrices are accepted
+    assert graph.add_node(11, values[3]) == 3
+    np.testing.assert_allclose(graph.matrices([9, 11]), values[2:].as_matrix())
+    np.testing.assert_allclose(graph.positions(), values.translation)
+    edge = graph.add_edge(7, 3, values[0].between(values[1]), np.eye(6))
+    graph.add_edges([3, 9], [9, 11], values[1:3].between(values[2:]).as_matrix(), np.eye(6))
+    assert edge == 0 and graph.num_edges == 3
+    assert graph.add_prior(7, values[0], np.eye(6) * 1e4) == 0
+    graph.remove_edges([1])
+    assert graph.num_edges == 2
+    with pytest.raises(KeyError, match="node 99"):
+        graph.add_edge(7, 99, values[0], np.eye(6))
+    with pytest.raises(ValueError, match="already in the graph"):
+        graph.add_node(3, values[0])
+    with pytest.raises(TypeError):
+        graph.add_node(12, SE2.identity())
+
+
+def test_nodes_added_without_values_are_composed_from_their_edges():
+    graph, _ = manhattan_world(num_poses=60, seed=81)
+    fresh = PoseGraph(SE2)
+    fresh.add_node(0, graph.values[0])
+    fresh.add_nodes(graph.node_ids[1:])
+    fresh.add_edges(
+        graph.node_ids[graph.edges.i],
+        graph.node_ids[graph.edges.j],
+        graph.edges.measurements,
+        graph.edges.information,
+    )
+    with pytest.raises(ValueError, match="no values"):
+        posegraph.optimize(fresh.copy(), init="file")
+    result = posegraph.optimize(fresh)
+    assert result.summary.converged
+    assert result.summary.final_error == pytest.approx(
+        posegraph.optimize(graph).summary.final_error, rel=1e-6
+    )
+
+
+def test_warm_starts_reuse_the_solution_and_then_the_structure():
+    full, _ = manhattan_world(num_poses=300, seed=82)
+    summaries = [posegraph.optimize(graph).summary for graph in stream(full, 50)]
+    assert summaries[0].initialization != "warm start"
+    assert all(s.initialization == "warm start" for s in summaries[1:])
+    assert all(s.reused and s.reused[0].startswith("previous solution") for s in summaries[1:])
+    scratch = posegraph.optimize(full.copy()).summary.final_error
+    assert summaries[-1].final_error == pytest.approx(scratch, rel=1e-6)
+    assert np.mean([s.num_iterations for s in summaries[1:]]) < np.mean(
+        [summaries[0].num_iterations, 4]
+    )
+
+
+def test_unchanged_structure_reuses_pattern_and_symbolic_factorization():
+    graph = random_graph(SE2, 40, 20, seed=83, noise=0.1)
+    first = posegraph.optimize(graph)
+    graph.set_values(
+        graph.values.retract(np.random.default_rng(84).normal(scale=0.05, size=(40, 3)))
+    )
+    second = posegraph.optimize(graph)
+    assert (
+        "sparsity pattern" in second.summary.reused
+        and "symbolic factorization" in second.summary.reused
+    )
+    assert second.summary.final_error == pytest.approx(first.summary.final_error, rel=1e-6)
+    graph.add_edge(
+        graph.node_ids[0], graph.node_ids[30], graph.values[0].between(graph.values[30]), np.eye(3)
+    )
+    third = posegraph.optimize(graph)
+    assert "sparsity pattern" not in third.summary.reused  # the structure changed
+
+
+def test_marginals_are_blocks_of_the_inverse_information():
+    """Against a dense inverse of H on a small graph (the library never forms one)."""
+    graph = random_graph(SE3, 12, 8, seed=85, noise=0.05, priors=0)
+    posegraph.optimize(graph)
+    held = graph.gauge_nodes()
+    system = NormalEquations(graph, held, "scipy")
+    data, _ = system.assemble(
+        linearize_between(graph.values, graph.edges),
+        graph.edges.information,
+        linearize_priors(graph.values, graph.priors),
+        graph.priors.information,
+    )
+    inverse = np.linalg.inv(system.matrix(data).toarray())
+    nodes = graph.node_ids[[3, 7]]
+    cov = posegraph.marginals(graph, nodes)
+    for k, node in enumerate([3, 7]):
+        block = slice(system.block_of[node] * 6, system.block_of[node] * 6 + 6)
+        np.testing.assert_allclose(cov[k], inverse[block, block], rtol=1e-9, atol=1e-12)
+    joint = posegraph.marginals(graph, nodes, joint=True)
+    rows = np.r_[
+        system.block_of[3] * 6 : system.block_of[3] * 6 + 6,
+        system.block_of[7] * 6 : system.block_of[7] * 6 + 6,
+    ]
+    np.testing.assert_allclose(joint, inverse[np.ix_(rows, rows)], rtol=1e-9, atol=1e-12)
+    assert np.all(posegraph.marginals(graph, graph.node_ids[held]) == 0)  # the gauge is exact
+    for backend in ("scipy",):
+        np.testing.assert_allclose(
+            posegraph.marginals(graph, nodes, linear_solver=backend), cov, rtol=1e-8
+        )
