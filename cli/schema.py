@@ -56,6 +56,7 @@ SUMMARY = {
         "reused": {"type": "array", "items": {"type": "string"}},
         "initialization": {"type": "string"},
         "initialization_time": _NUMBER,
+        "input_error": {"type": ["number", "null"]},
         "robust": {"type": ["string", "null"]},
         "rejected_edges": {"type": "array", "items": {"type": "integer"}},
         "history": {

@@ -15,8 +15,7 @@ def format_summary(
     lines = [
         f"{source}: {graph.group.__name__}, {graph.num_nodes} nodes, {graph.num_edges} edges",
         f"  initialisation  {summary.initialization} ({summary.initialization_time:.3f} s)",
-        f"  error ½Σrᵀ Ω r  {summary.initial_error:.10g} -> {summary.final_error:.10g}",
-        f"  chi2  Σrᵀ Ω r   {summary.initial_chi2:.10g} -> {summary.final_chi2:.10g}",
+        *_error_lines(summary),
         f"  iterations      {summary.num_iterations} ({summary.method}, {summary.linear_solver})",
         f"  termination     {summary.termination}{'' if summary.converged else ' (not converged)'}",
         f"  time            {summary.total_time:.3f} s: "
@@ -31,6 +30,20 @@ def format_summary(
     if plot:
         lines.append(f"  plotted         {plot}")
     return "\n".join(lines)
+
+
+def _error_lines(summary: Summary) -> list[str]:
+    """Error and χ² from the input values, through the initialisation, to the optimum."""
+    steps = [(summary.initial_error, None)]
+    if summary.input_error is not None and summary.input_error != summary.initial_error:
+        steps = [(summary.input_error, "input"), (summary.initial_error, summary.initialization)]
+    lines = []
+    for name, factor in (("error ½Σrᵀ Ω r", 1.0), ("chi2  Σrᵀ Ω r ", 2.0)):
+        path = " -> ".join(
+            f"{factor * value:.10g}" + (f" ({label})" if label else "") for value, label in steps
+        )
+        lines.append(f"  {name}  {path} -> {factor * summary.final_error:.10g}")
+    return lines
 
 
 def format_diagnosis(d: Diagnosis) -> str:

@@ -7,7 +7,7 @@ import time
 
 import numpy as np
 
-from .factors import between_residuals, weighted_squares
+from .factors import between_residuals, chi2, weighted_squares
 from .gnc import gnc_tls
 from .graph import PoseGraph
 from .initialization import choose, initialize, odometry_mask, spanning_tree_values
@@ -62,6 +62,9 @@ def optimize(
     """
     options = options or SolverOptions()
     start = time.perf_counter()
+    input_error = (
+        0.5 * chi2(graph.values, graph.edges, graph.priors) if graph.initialized.all() else None
+    )
     reused = []
     if init == "auto" and graph.optimized:
         init = "warm start"
@@ -106,6 +109,7 @@ def optimize(
     result.summary.initialization = init
     result.summary.initialization_time = init_time
     result.summary.reused = reused
+    result.summary.input_error = input_error
     result.summary.total_time = time.perf_counter() - start
     graph.set_values(result.values)
     graph.optimized = True

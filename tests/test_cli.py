@@ -269,7 +269,7 @@ def test_scale_drift_command(tmp_path):
     out, figure = tmp_path / "corrected.tum", tmp_path / "drift.png"
     document = run_json("scale-drift", source, "-o", out, "--gt", truth, "--plot", figure)
     assert document["ate_after"] * 10 <= document["ate_before"]
-    assert document["scale_range"][0] < 0.5 < document["scale_range"][1] == 1.0
+    assert document["scale_range"][0] < 0.5 < document["scale_range"][1] == pytest.approx(1.0)
     assert_not_blank(figure)
     corrected = np.loadtxt(out)
     assert corrected.shape == (300, 8)

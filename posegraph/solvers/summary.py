@@ -42,6 +42,9 @@ class Summary:
     initialization: str = "file"
     """How the starting values were made (``posegraph.initialization.INITIALIZERS``)."""
     initialization_time: float = 0.0
+    input_error: float | None = None
+    """½ Σ rᵀΩr at the values given, before the initialisation replaced them (None when some
+    nodes had no values)."""
     robust: str | None = None
     """The robust kernel and width used ("gnc:3.36", "cauchy:2"), or None for least squares."""
     rejected_edges: list[int] = dataclasses.field(default_factory=list)
@@ -77,6 +80,7 @@ class Summary:
             "reused": list(self.reused),
             "initialization": self.initialization,
             "initialization_time": self.initialization_time,
+            "input_error": self.input_error,
             "robust": self.robust,
             "rejected_edges": list(self.rejected_edges),
             "history": [dataclasses.asdict(r) for r in self.iterations],
