@@ -82,10 +82,7 @@ def optimize(
 
     rejected = np.zeros(0, dtype=np.int64)
     if robust is None:
-        system = _cached_system(graph, options)
-        if system is not None:
-            reused += ["sparsity pattern", "symbolic factorization"]
-        result = solve(graph, options, callback, system=system)
+        result = solve(graph, options, callback, system=_cached_system(graph, options))
         graph.normal_equations = (_structure_key(graph, options), result.system)
     else:
         mask = robust_mask(graph, robust_edges)
@@ -108,7 +105,7 @@ def optimize(
         result.summary.rejected_edges = rejected.tolist()
     result.summary.initialization = init
     result.summary.initialization_time = init_time
-    result.summary.reused = reused
+    result.summary.reused = reused + result.summary.reused
     result.summary.input_error = input_error
     result.summary.total_time = time.perf_counter() - start
     graph.set_values(result.values)

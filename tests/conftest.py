@@ -68,4 +68,16 @@ def random_graph(
     return graph
 
 
+def union(first: PoseGraph, second: PoseGraph, id_offset: int) -> PoseGraph:
+    """One graph holding both graphs as separate components (the second's ids shifted)."""
+    graph = PoseGraph(first.group)
+    for part, offset in ((first, 0), (second, id_offset)):
+        ids = part.node_ids + offset
+        graph.add_nodes(ids, part.values)
+        graph.add_edges(
+            ids[part.edges.i], ids[part.edges.j], part.edges.measurements, part.edges.information
+        )
+    return graph
+
+
 POSE_GROUPS = [SE2, SE3, Sim3]

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from posegraph_cli.schema import SCHEMAS
 from posegraph_datasets import example
+from posegraph_datasets.paths import BENCHMARK_GRAPHS
 
 from posegraph.io import read_graph
 
@@ -236,21 +237,7 @@ def test_debug_shows_the_traceback(tmp_path):
     assert "Traceback" in run("info", path, "--debug", check_exit=2).stderr
 
 
-BENCHMARK_FILES = [
-    "tinyGrid3D.g2o",
-    "smallGrid3D.g2o",
-    "intel.g2o",
-    "MIT.g2o",
-    "CSAIL.g2o",
-    "manhattan.g2o",
-    "sphere2500.g2o",
-    "parking-garage.g2o",
-    "torus3D.g2o",
-    "sphere_bignoise_vertex3.g2o",
-]
-
-
-@pytest.mark.parametrize("name", BENCHMARK_FILES)
+@pytest.mark.parametrize("name", BENCHMARK_GRAPHS)
 def test_every_command_succeeds_on_the_benchmark_graphs(tmp_path, shared_dataset, name):
     source = shared_dataset(name)
     run("info", source)

@@ -21,23 +21,27 @@ def test_between_residual_definition(group):
         np.testing.assert_allclose(lin.residuals[k], expected, atol=1e-12)
 
 
+def _residual_jacobian(linearize, values, edges, edge: int, node: int, dof: int, h: float = 1e-6):
+    """Central differences of edge ``edge``'s residual in node ``node``'s right perturbation."""
+    columns = []
+    for c in range(dof):
+        delta = np.zeros((values.batch_shape[0], dof))
+        delta[node, c] = h
+        plus = linearize(values.retract(delta), edges).residuals[edge]
+        minus = linearize(values.retract(-delta), edges).residuals[edge]
+        columns.append((plus - minus) / (2 * h))
+    return np.stack(columns, axis=1)
+
+
 @pytest.mark.parametrize("group", POSE_GROUPS, ids=lambda g: g.__name__)
 def test_between_jacobians_match_central_differences(group):
     graph = random_graph(group, 6, 4, seed=2, noise=0.3)
     x, e = graph.values, graph.edges
     lin = linearize_between(x, e)
-    h = 1e-6
     for k in range(len(e)):
-        for which, analytic in (("i", lin.jac_i[k]), ("j", lin.jac_j[k])):
-            node = e.i[k] if which == "i" else e.j[k]
-            columns = []
-            for c in range(group.dof):
-                delta = np.zeros((graph.num_nodes, group.dof))
-                delta[node, c] = h
-                plus = linearize_between(x.retract(delta), e).residuals[k]
-                minus = linearize_between(x.retract(-delta), e).residuals[k]
-                columns.append((plus - minus) / (2 * h))
-            np.testing.assert_allclose(analytic, np.stack(columns, axis=1), atol=1e-7)
+        for node, analytic in ((e.i[k], lin.jac_i[k]), (e.j[k], lin.jac_j[k])):
+            numeric = _residual_jacobian(linearize_between, x, e, k, node, group.dof)
+            np.testing.assert_allclose(analytic, numeric, atol=1e-7)
 
 
 @pytest.mark.parametrize("group", POSE_GROUPS, ids=lambda g: g.__name__)
@@ -45,18 +49,11 @@ def test_prior_residual_and_jacobian(group):
     graph = random_graph(group, 5, 0, seed=3, priors=3)
     x, p = graph.values, graph.priors
     lin = linearize_priors(x, p)
-    h = 1e-6
     for k in range(len(p)):
         expected = (p.measurements[k].inverse() @ x[p.i[k]]).log()
         np.testing.assert_allclose(lin.residuals[k], expected, atol=1e-12)
-        columns = []
-        for c in range(group.dof):
-            delta = np.zeros((graph.num_nodes, group.dof))
-            delta[p.i[k], c] = h
-            plus = linearize_priors(x.retract(delta), p).residuals[k]
-            minus = linearize_priors(x.retract(-delta), p).residuals[k]
-            columns.append((plus - minus) / (2 * h))
-        np.testing.assert_allclose(lin.jac_j[k], np.stack(columns, axis=1), atol=1e-7)
+        numeric = _residual_jacobian(linearize_priors, x, p, k, p.i[k], group.dof)
+        np.testing.assert_allclose(lin.jac_j[k], numeric, atol=1e-7)
 
 
 def test_chi2_is_the_weighted_sum_of_squares():

@@ -16,7 +16,7 @@ from posegraph.initialization import choose, initialize
 from posegraph.lie import SE2, SE3
 from posegraph.robust import KERNELS, RobustKernel, tls_gnc_weights
 
-from .conftest import random_graph
+from .conftest import random_graph, union
 
 
 def _noise_free(graph: PoseGraph, truth) -> PoseGraph:
@@ -41,22 +41,8 @@ def test_chordal_recovers_noise_free_poses_exactly(generate):
 
 @pytest.mark.parametrize("group", [SE2, SE3], ids=lambda g: g.__name__)
 def test_chordal_accepts_full_information_and_several_components(group):
-    a, b = (
-        random_graph(group, 15, 8, seed=61, noise=0.02),
-        random_graph(group, 7, 0, seed=62, noise=0.02),
-    )
-    graph = PoseGraph(group)
-    graph.add_nodes(a.node_ids, a.values)
-    graph.add_nodes(b.node_ids + 500, b.values)
-    graph.add_edges(
-        a.node_ids[a.edges.i], a.node_ids[a.edges.j], a.edges.measurements, a.edges.information
-    )
-    graph.add_edges(
-        b.node_ids[b.edges.i] + 500,
-        b.node_ids[b.edges.j] + 500,
-        b.edges.measurements,
-        b.edges.information,
-    )
+    a = random_graph(group, 15, 8, seed=61, noise=0.02)
+    graph = union(a, random_graph(group, 7, 0, seed=62, noise=0.02), 500)
     graph.add_nodes([9999], group.identity((1,)))  # an isolated node
     graph.add_edges(
         [a.node_ids[3]], [9999], a.edges.measurements[:1], a.edges.information[:1]

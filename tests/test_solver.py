@@ -6,14 +6,13 @@ import numpy as np
 import pytest
 
 from posegraph.factors import linearize_between, linearize_priors
-from posegraph.graph import PoseGraph
 from posegraph.io import read_graph
 from posegraph.lie import SE2, SE3
 from posegraph.linear import NormalEquations
 from posegraph.solvers import SolverOptions, optimize
 from posegraph.sparse_cholesky import available_backends
 
-from .conftest import POSE_GROUPS, random_graph
+from .conftest import POSE_GROUPS, random_graph, union
 
 
 def _gradient_norm(graph, values, held):
@@ -80,18 +79,7 @@ def test_a_prior_replaces_the_gauge():
 
 def test_each_connected_component_gets_its_own_gauge():
     a, b = random_graph(SE2, 8, 3, seed=46), random_graph(SE2, 6, 2, seed=47)
-    graph = PoseGraph(SE2)
-    graph.add_nodes(a.node_ids, a.values)
-    graph.add_nodes(b.node_ids + 1000, b.values)
-    graph.add_edges(
-        a.node_ids[a.edges.i], a.node_ids[a.edges.j], a.edges.measurements, a.edges.information
-    )
-    graph.add_edges(
-        b.node_ids[b.edges.i] + 1000,
-        b.node_ids[b.edges.j] + 1000,
-        b.edges.measurements,
-        b.edges.information,
-    )
+    graph = union(a, b, 1000)
     assert graph.node_ids[graph.gauge_nodes()].tolist() == [a.node_ids[0], b.node_ids[0] + 1000]
     result = optimize(graph)
     expected = optimize(a).summary.final_error + optimize(b).summary.final_error

@@ -101,24 +101,35 @@ def optimize(
     clock.lap("linearize")
     initial_error = current.error
     history: list[IterationRecord] = []
-    termination, converged = "maximum iterations reached", False
 
     if system.size == 0 or options.max_iterations == 0:
         termination = "nothing to optimise" if system.size == 0 else "maximum iterations reached"
         converged = system.size == 0
-        return _result(
-            graph,
-            current,
-            options,
-            system,
-            clock,
-            initial_error,
-            history,
-            termination,
-            converged,
-            reused,
+    else:
+        current, termination, converged = _iterate(
+            graph, options, callback, system, weighting, clock, current, history
         )
+    clock.lap("other")
+    summary = Summary(
+        method=options.method,
+        linear_solver=system.cholesky.name,
+        initial_error=initial_error,
+        final_error=current.error,
+        iterations=history,
+        termination=termination,
+        converged=converged,
+        phase_times=dict(clock.times),
+        total_time=clock.elapsed(),
+        num_variables=system.size,
+        reused=reused,
+    )
+    return Result(current.values, summary, system)
 
+
+def _iterate(graph, options, callback, system, weighting, clock, current, history):
+    """The iterations of ``optimize``; returns (final linearisation, termination, converged).
+    ``history`` receives a record per iteration."""
+    termination, converged = "maximum iterations reached", False
     data, gradient = system.assemble(
         current.between, current.information, current.priors, graph.priors.information
     )
@@ -210,35 +221,4 @@ def optimize(
         )
         diagonal = system.diagonal(data)
         clock.lap("assemble")
-    return _result(
-        graph,
-        current,
-        options,
-        system,
-        clock,
-        initial_error,
-        history,
-        termination,
-        converged,
-        reused,
-    )
-
-
-def _result(
-    graph, current, options, system, clock, initial_error, history, termination, converged, reused
-) -> Result:
-    clock.lap("other")
-    summary = Summary(
-        method=options.method,
-        linear_solver=system.cholesky.name,
-        initial_error=initial_error,
-        final_error=current.error,
-        iterations=history,
-        termination=termination,
-        converged=converged,
-        phase_times=dict(clock.times),
-        total_time=clock.elapsed(),
-        num_variables=system.size,
-        reused=reused,
-    )
-    return Result(current.values, summary, system)
+    return current, termination, converged
