@@ -39,6 +39,12 @@ def _peers(count: int, rng: np.random.Generator):
         ),
         ("SE3 log", x.log, lambda: [gtsam.Pose3.Logmap(p) for p in gx], rx.as_rotvec),
         (
+            "SE3 exp + log",
+            lambda: SE3.exp(se3_tangents).log(),
+            lambda: [gtsam.Pose3.Logmap(gtsam.Pose3.Expmap(v)) for v in gtsam_tangents],
+            lambda: Rotation.from_rotvec(rotvecs).as_rotvec(),
+        ),
+        (
             "SE3 compose",
             lambda: x @ y,
             lambda: [a.compose(b) for a, b in zip(gx, gy, strict=True)],

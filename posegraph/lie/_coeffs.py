@@ -59,6 +59,25 @@ def theta_minus_sin_over_cube(theta: np.ndarray) -> np.ndarray:
     return _coefficient(theta, lambda t: (t - np.sin(t)) / t**3, _alternating(3))
 
 
+def rotation_coefficients(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(sin θ/θ, (1 − cos θ)/θ², (θ − sin θ)/θ³) from one sin and cos evaluation, with the
+    series of ``sin_over`` and its siblings below ``_SERIES_BELOW``."""
+    theta = np.asarray(theta, dtype=float)
+    small = np.abs(theta) < _SERIES_BELOW
+    safe = np.where(small, 1.0, theta) if small.any() else theta
+    sin, cos = np.sin(safe), np.cos(safe)
+    inverse = 1.0 / safe
+    inverse_sq = inverse * inverse
+    a = np.asarray(sin * inverse)
+    b = np.asarray((1.0 - cos) * inverse_sq)
+    c = np.asarray((1.0 - a) * inverse_sq)
+    if small.any():
+        t2 = theta[small] ** 2
+        for out, offset in ((a, 1), (b, 2), (c, 3)):
+            out[small] = _even_series(t2, _alternating(offset))
+    return a, b, c
+
+
 def se3_q_second(theta: np.ndarray) -> np.ndarray:
     """(θ² + 2 cos θ − 2) / (2 θ⁴), the second Q-matrix coefficient (Barfoot eq. 7.86)."""
     return _coefficient(
@@ -80,15 +99,29 @@ def se3_q_third(theta: np.ndarray) -> np.ndarray:
     )
 
 
-def so3_jr_inv_coefficient(theta: np.ndarray) -> np.ndarray:
-    """(1 − (θ/2) cot(θ/2)) / θ², the φ×² coefficient of the inverse SO(3) Jacobian.
+_JR_INV_SERIES = [1 / 12, 1 / 720, 1 / 30240, 1 / 1209600, 1 / 47900160]
+"""Series of (1 − (θ/2) cot(θ/2))/θ², from x cot x = 1 − Σ 2^{2n} |B_{2n}| x^{2n} / (2n)!."""
 
-    Series from x cot x = 1 − Σ 2^{2n} |B_{2n}| x^{2n} / (2n)! with x = θ/2.
-    """
-    series = [1 / 12, 1 / 720, 1 / 30240, 1 / 1209600, 1 / 47900160]
-    return _coefficient(
-        theta, lambda t: (1.0 - 0.5 * t * np.sin(t) / (1.0 - np.cos(t))) / t**2, series
+
+def so3_jr_inv_coefficient(theta: np.ndarray) -> np.ndarray:
+    """(1 − (θ/2) cot(θ/2)) / θ², the φ×² coefficient of the inverse SO(3) Jacobian."""
+    theta = np.asarray(theta, dtype=float)
+    return so3_jr_inv_coefficient_from_trig(theta, np.sin(theta), np.cos(theta))
+
+
+def so3_jr_inv_coefficient_from_trig(
+    theta: np.ndarray, sin: np.ndarray, cos: np.ndarray
+) -> np.ndarray:
+    """The same, given sin θ and cos θ (a logarithm has them before it has θ)."""
+    small = np.abs(theta) < _SERIES_BELOW
+    if not small.any():
+        return (1.0 - 0.5 * theta * sin / (1.0 - cos)) / theta**2
+    safe = np.where(small, 1.0, theta)
+    result = np.asarray(
+        (1.0 - 0.5 * safe * np.where(small, 0.0, sin) / np.where(small, 1.0, 1.0 - cos)) / safe**2
     )
+    result[small] = _even_series(theta[small] ** 2, _JR_INV_SERIES)
+    return result
 
 
 def half_cot_half(theta: np.ndarray) -> np.ndarray:
@@ -102,28 +135,37 @@ def hat3(v: np.ndarray) -> np.ndarray:
     return so3_polynomial(v, 0.0, 1.0, 0.0)
 
 
+def _components(phi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Contiguous x, y, z of a (…, 3) array (elementwise work on strided columns is slower)."""
+    phi = np.asarray(phi, dtype=float)
+    return np.array(phi[..., 0]), np.array(phi[..., 1]), np.array(phi[..., 2])  # copies keep 0-d
+
+
 def so3_polynomial(phi: np.ndarray, c0, c1, c2) -> np.ndarray:
     """c0 I + c1 φ× + c2 φ×² as (…, 3, 3), written entrywise with φ×² = φφᵀ − |φ|² I.
 
     Exp, the Jacobians and V of SO(3), SE(3) and Sim(3) are all of this form.
     """
-    phi = np.asarray(phi, dtype=float)
-    x, y, z = phi[..., 0], phi[..., 1], phi[..., 2]
+    x, y, z = _components(phi)
     c0, c1, c2 = np.asarray(c0, float), np.asarray(c1, float), np.asarray(c2, float)
-    diagonal = c0 - c2 * (x * x + y * y + z * z)
-    shape = np.broadcast_shapes(phi.shape[:-1], c0.shape, c1.shape, c2.shape)
-    out = np.empty(shape + (3, 3))
-    c2xy, c2xz, c2yz = c2 * x * y, c2 * x * z, c2 * y * z
+    shape = np.broadcast_shapes(x.shape, c0.shape, c1.shape, c2.shape)
+    c2x, c2y, c2z = c2 * x, c2 * y, c2 * z
     c1x, c1y, c1z = c1 * x, c1 * y, c1 * z
-    out[..., 0, 0] = diagonal + c2 * x * x
-    out[..., 1, 1] = diagonal + c2 * y * y
-    out[..., 2, 2] = diagonal + c2 * z * z
-    out[..., 0, 1] = c2xy - c1z
-    out[..., 1, 0] = c2xy + c1z
-    out[..., 0, 2] = c2xz + c1y
-    out[..., 2, 0] = c2xz - c1y
-    out[..., 1, 2] = c2yz - c1x
-    out[..., 2, 1] = c2yz + c1x
+    diagonal = c0 - (c2x * x + c2y * y + c2z * z)
+    xy, xz, yz = c2x * y, c2x * z, c2y * z
+    out = np.empty(shape + (3, 3))
+    np.multiply(c2x, x, out=out[..., 0, 0])
+    out[..., 0, 0] += diagonal
+    np.multiply(c2y, y, out=out[..., 1, 1])
+    out[..., 1, 1] += diagonal
+    np.multiply(c2z, z, out=out[..., 2, 2])
+    out[..., 2, 2] += diagonal
+    np.subtract(xy, c1z, out=out[..., 0, 1])
+    np.add(xy, c1z, out=out[..., 1, 0])
+    np.add(xz, c1y, out=out[..., 0, 2])
+    np.subtract(xz, c1y, out=out[..., 2, 0])
+    np.subtract(yz, c1x, out=out[..., 1, 2])
+    np.add(yz, c1x, out=out[..., 2, 1])
     return out
 
 
@@ -132,22 +174,43 @@ def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     a, b = np.asarray(a, float), np.asarray(b, float)
     ax, ay, az = a[..., 0], a[..., 1], a[..., 2]
     bx, by, bz = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx], axis=-1)
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = ay * bz - az * by
+    out[..., 1] = az * bx - ax * bz
+    out[..., 2] = ax * by - ay * bx
+    return out
 
 
 def so3_polynomial_apply(phi: np.ndarray, c0, c1, c2, v: np.ndarray) -> np.ndarray:
-    """(c0 I + c1 φ× + c2 φ×²) v without forming the matrix."""
-    phi_v = cross(phi, v)
-    c0, c1, c2 = (np.asarray(c, float)[..., None] for c in (c0, c1, c2))
-    return c0 * v + c1 * phi_v + c2 * cross(phi, phi_v)
+    """(c0 I + c1 φ× + c2 φ×²) v without forming the matrix: c0 v + c1 (φ × v) + c2 φ × (φ × v),
+    with φ × (φ × v) = φ (φ·v) − |φ|² v. Works in place on one scratch buffer (this is on the
+    path of every exp and log)."""
+    x, y, z = _components(phi)
+    vx, vy, vz = _components(v)
+    c0, c1, c2 = np.asarray(c0, float), np.asarray(c1, float), np.asarray(c2, float)
+    scale_phi = c2 * (x * vx + y * vy + z * vz)
+    scale_v = c0 - c2 * (x * x + y * y + z * z)
+    out = np.empty(np.broadcast_shapes(x.shape, vx.shape, c0.shape, c1.shape, c2.shape) + (3,))
+    scratch = np.empty(out.shape[:-1])
+    for k, (a, b, c, d, v_k, phi_k) in enumerate(
+        ((y, vz, z, vy, vx, x), (z, vx, x, vz, vy, y), (x, vy, y, vx, vz, z))
+    ):
+        np.multiply(a, b, out=scratch)
+        scratch -= c * d  # (φ × v)_k
+        scratch *= c1
+        scratch += scale_v * v_k
+        scratch += scale_phi * phi_k
+        out[..., k] = scratch
+    return out
 
 
 def vee3(m: np.ndarray) -> np.ndarray:
     """Inverse of :func:`hat3`, reading the skew part of a (…, 3, 3) array."""
-    return 0.5 * np.stack(
-        [m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1]],
-        axis=-1,
-    )
+    out = np.empty(m.shape[:-2] + (3,))
+    np.subtract(m[..., 2, 1], m[..., 1, 2], out=out[..., 0])
+    np.subtract(m[..., 0, 2], m[..., 2, 0], out=out[..., 1])
+    np.subtract(m[..., 1, 0], m[..., 0, 1], out=out[..., 2])
+    return 0.5 * out
 
 
 def wrap_angle(theta: np.ndarray) -> np.ndarray:

@@ -18,7 +18,7 @@ from .so3 import (
     angle,
     jr_inv_matrix,
     jr_matrix,
-    log_matrix,
+    log_with_trig,
     matrix_to_quaternion,
     project_to_rotation,
     quaternion_to_matrix,
@@ -66,16 +66,14 @@ class SE3(LieGroup):
         """R = Exp(φ), t = V ρ with V = jl(φ) = I + ((1 − cos θ)/θ²) φ× + ((θ − sin θ)/θ³) φ×²."""
         tangent = np.asarray(tangent, float)
         rho, phi = tangent[..., :3], tangent[..., 3:]
-        theta = angle(phi)
-        a, b = _coeffs.sin_over(theta), _coeffs.one_minus_cos_over_sq(theta)
-        c = _coeffs.theta_minus_sin_over_cube(theta)
+        a, b, c = _coeffs.rotation_coefficients(angle(phi))
         t = so3_polynomial_apply(phi, 1.0, b, c, rho)
         return cls(so3_polynomial(phi, 1.0, a, b), t)
 
     def log(self) -> np.ndarray:
         """φ = Log R, ρ = V⁻¹ t with V⁻¹ = jl⁻¹(φ) = I − ½ φ× + c(θ) φ×²."""
-        phi = log_matrix(self.rotation)
-        c = _coeffs.so3_jr_inv_coefficient(angle(phi))
+        phi, theta, sin, cos = log_with_trig(self.rotation)
+        c = _coeffs.so3_jr_inv_coefficient_from_trig(theta, sin, cos)
         translation = np.broadcast_to(self.translation, phi.shape)
         rho = so3_polynomial_apply(phi, 1.0, -0.5, c, translation)
         return np.concatenate([rho, phi], axis=-1)

@@ -29,8 +29,8 @@ def angle(phi: np.ndarray) -> np.ndarray:
 
 def exp_matrix(phi: np.ndarray) -> np.ndarray:
     """Rodrigues: R = I + (sin θ/θ) φ× + ((1 − cos θ)/θ²) φ×²."""
-    theta = angle(phi)
-    return so3_polynomial(phi, 1.0, _coeffs.sin_over(theta), _coeffs.one_minus_cos_over_sq(theta))
+    a, b, _ = _coeffs.rotation_coefficients(angle(phi))
+    return so3_polynomial(phi, 1.0, a, b)
 
 
 def matrix_to_quaternion(rotation: np.ndarray) -> np.ndarray:
@@ -102,7 +102,12 @@ def quaternion_to_matrix(quaternion: np.ndarray) -> np.ndarray:
 
 
 def log_matrix(rotation: np.ndarray) -> np.ndarray:
-    """The rotation vector φ of (…, 3, 3) rotation matrices, |φ| ≤ π.
+    """The rotation vector φ of (…, 3, 3) rotation matrices, |φ| ≤ π (``log_with_trig``)."""
+    return log_with_trig(rotation)[0]
+
+
+def log_with_trig(rotation: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(φ, θ, sin θ, cos θ) of (…, 3, 3) rotation matrices, |φ| = θ ≤ π.
 
     With v = vee(R − Rᵀ)/2 = sin θ · axis and cos θ = (tr R − 1)/2: θ = atan2(|v|, cos θ) and
     φ = (θ / |v|) v. Near θ = π, where |v| → 0, φ comes from the quaternion (u, w) instead:
@@ -110,7 +115,7 @@ def log_matrix(rotation: np.ndarray) -> np.ndarray:
     """
     rotation = np.asarray(rotation, float)
     v = vee3(rotation)
-    cos = 0.5 * (np.trace(rotation, axis1=-2, axis2=-1) - 1.0)
+    cos = 0.5 * (rotation[..., 0, 0] + rotation[..., 1, 1] + rotation[..., 2, 2] - 1.0)
     sin = np.sqrt(np.einsum("...i,...i->...", v, v))
     theta = np.arctan2(sin, cos)
     tiny = sin < 1e-6
@@ -123,18 +128,13 @@ def log_matrix(rotation: np.ndarray) -> np.ndarray:
         u, w = q[..., :3], q[..., 3]
         n = np.sqrt(np.einsum("...i,...i->...", u, u))
         phi[near_half_turn] = (2.0 * np.arctan2(n, w) / n)[..., None] * u
-    return phi
+    return phi, theta, sin, cos
 
 
 def jr_matrix(phi: np.ndarray) -> np.ndarray:
     """jr(φ) = I − ((1 − cos θ)/θ²) φ× + ((θ − sin θ)/θ³) φ×² (Barfoot eq. 7.77b)."""
-    theta = angle(phi)
-    return so3_polynomial(
-        phi,
-        1.0,
-        -_coeffs.one_minus_cos_over_sq(theta),
-        _coeffs.theta_minus_sin_over_cube(theta),
-    )
+    _, b, c = _coeffs.rotation_coefficients(angle(phi))
+    return so3_polynomial(phi, 1.0, -b, c)
 
 
 def jr_inv_matrix(phi: np.ndarray) -> np.ndarray:
