@@ -2,7 +2,7 @@
 
 Installed as package ``posegraph_datasets``. The ``.g2o`` files here are written by
 ``python -m posegraph_datasets.make_examples`` from the seeded generators; tests check that
-regenerating them reproduces every byte.
+regenerating them reproduces them (every number to 1e-12).
 """
 
 from pathlib import Path

@@ -11,9 +11,17 @@ from posegraph_datasets.make_examples import example_texts
 from posegraph.solvers import optimize
 
 
-def test_bundled_examples_regenerate_byte_for_byte():
+def test_bundled_examples_regenerate(tmp_path):
+    """Same lines, same ids, same numbers to 1e-12 (the last printed digit of a float may
+    differ between CPUs, whose vectorised sin and cos can differ in the last bit)."""
     for name, text in example_texts().items():
-        assert (EXAMPLES_DIR / name).read_text() == text, f"{name} differs: rerun make_examples"
+        fresh = tmp_path / name
+        fresh.write_text(text)
+        committed, regenerated = (EXAMPLES_DIR / name).read_text().split(), text.split()
+        assert len(committed) == len(regenerated), f"{name} differs: rerun make_examples"
+        words = [(a, b) for a, b in zip(committed, regenerated, strict=True) if a != b]
+        for a, b in words:
+            assert float(a) == pytest.approx(float(b), rel=1e-12, abs=1e-12), f"{name}: {a} vs {b}"
 
 
 def test_unknown_example_names_the_available_ones():
