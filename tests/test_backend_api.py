@@ -26,6 +26,7 @@ def test_batch_and_single_editing_with_arrays():
     edge = graph.add_edge(7, 3, values[0].between(values[1]), np.eye(6))
     graph.add_edges([3, 9], [9, 11], values[1:3].between(values[2:]).as_matrix(), np.eye(6))
     assert edge == 0 and graph.num_edges == 3
+    assert graph.has_node(7) and not graph.has_node(99)
     assert graph.add_prior(7, values[0], np.eye(6) * 1e4) == 0
     graph.remove_edges([1])
     assert graph.num_edges == 2

@@ -9,7 +9,6 @@ skipped and recorded instead.
 from __future__ import annotations
 
 import dataclasses
-from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -53,9 +52,6 @@ class LineChecker:
         for k in bad_rows:
             self.fail(int(rows.line_numbers[k]), f"{rows.tag}: {message(k)}")
         return rows.subset(~bad) if bad_rows.size else rows
-
-    def skipped_by_tag(self) -> Counter:
-        return Counter(message.split(":", 1)[0] for _, message in self.skipped)
 
 
 def read_lines(path: str) -> list[tuple[int, list[str]]]:
@@ -157,21 +153,3 @@ def upper_from_symmetric(matrices: np.ndarray) -> np.ndarray:
     """Inverse of :func:`symmetric_from_upper`."""
     rows, cols = np.triu_indices(matrices.shape[-1])
     return matrices[:, rows, cols]
-
-
-def check_information(rows: Rows, information: np.ndarray, checker: LineChecker):
-    """Reject information matrices that are not symmetric positive definite."""
-    smallest = np.linalg.eigvalsh(information)[:, 0] if len(information) else np.zeros(0)
-    bad = ~(smallest > 0)
-    kept = checker.keep_good(
-        rows,
-        bad,
-        lambda k: f"information matrix is not positive definite (λ_min = {smallest[k]:.3g})",
-    )
-    return kept, information[~bad]
-
-
-def check_quaternions(rows: Rows, columns: slice, checker: LineChecker) -> Rows:
-    """Reject (near-)zero quaternions; others are normalised by the group constructors."""
-    norms = np.linalg.norm(rows.numbers[:, columns], axis=1)
-    return checker.keep_good(rows, norms < 1e-9, lambda k: "quaternion has zero norm")

@@ -95,11 +95,3 @@ class Result:
     summary: Summary
     system: object = dataclasses.field(default=None, repr=False, compare=False)
     """The ``NormalEquations`` used (pattern and symbolic factorisation), for reuse."""
-
-    def values_of(self, graph, node_ids) -> LieGroup:
-        """The optimised values of some nodes of ``graph``."""
-        return self.values[graph.index(node_ids)]
-
-    @property
-    def error(self) -> float:
-        return self.summary.final_error
