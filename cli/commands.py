@@ -21,7 +21,11 @@ from .summary import format_diagnosis, format_evaluation, format_summary
 
 
 def _options(args: argparse.Namespace) -> ReadOptions:
-    return ReadOptions(lenient=args.lenient, g2o_rotation_information=args.g2o_rotation_information)
+    return ReadOptions(
+        lenient=args.lenient,
+        g2o_rotation_information=args.g2o_rotation_information,
+        scale_information=getattr(args, "scale_information", None),
+    )
 
 
 def _emit(args: argparse.Namespace, record: dict, text: str) -> None:
@@ -159,15 +163,12 @@ def scale_drift(args: argparse.Namespace) -> int:
     from posegraph.trajectory_io import Trajectory, as_se3, write_trajectory
 
     _refuse_to_overwrite(args.input, args.output, args.overwrite)
-    options = ReadOptions(
-        lenient=args.lenient,
-        g2o_rotation_information=args.g2o_rotation_information,
-        scale_information=args.scale_information,
-    )
-    graph = read_graph(args.input, options).graph
+    graph = read_graph(args.input, _options(args)).graph
     before = Trajectory(graph.node_ids.astype(float), as_se3(graph.values))
     correction = correct_scale_drift(graph, args.scale_information, args.convention)
-    after = Trajectory(correction.node_ids.astype(float), correction.poses)
+    keys = correction.node_ids.astype(float)
+    after = Trajectory(keys, correction.poses)  # in the convention asked for
+    corrected = Trajectory(keys, as_se3(correction.graph.values))  # world-from-camera
     if args.output:
         written = output_format(args.output)
         if written in ("tum", "kitti"):
@@ -195,13 +196,12 @@ def scale_drift(args: argparse.Namespace) -> int:
     ]
     curves = [
         ("before", before.positions),
-        ("corrected", as_se3(correction.graph.values).translation),
+        ("corrected", corrected.positions),
     ]
     if args.gt:
         truth = load_trajectory(args.gt, _options(args))
-        world = Trajectory(after.keys, as_se3(correction.graph.values))
         ate_before = evaluate(before, truth, "se3").ate.rmse
-        ate_after = evaluate(world, truth, "se3").ate.rmse
+        ate_after = evaluate(corrected, truth, "se3").ate.rmse
         record["ate_before"], record["ate_after"] = ate_before, ate_after
         lines.append(
             f"  ATE (SE3-aligned, no scale)  before {ate_before:.6g}  after {ate_after:.6g}"

@@ -7,7 +7,7 @@ import time
 
 import numpy as np
 
-from .factors import between_residuals, chi2, weighted_squares
+from .factors import between_squares, chi2
 from .gnc import gnc_tls
 from .graph import PoseGraph
 from .initialization import choose, initialize, odometry_mask, spanning_tree_values
@@ -97,9 +97,7 @@ def optimize(
         else:
             kernel = RobustKernel(name, width)
             result = solve(graph, options, callback, weighting=Robustifier(kernel, mask))
-            s = weighted_squares(
-                between_residuals(result.values, graph.edges), graph.edges.information
-            )
+            s = between_squares(result.values, graph.edges)
             rejected = np.flatnonzero(mask & (s > width**2))
         result.summary.robust = f"{name}:{width:.6g}"
         result.summary.rejected_edges = rejected.tolist()

@@ -13,6 +13,7 @@ import dataclasses
 import numpy as np
 
 from .factors import chi2
+from .initialization import odometry_mask
 from .io.reader import ReadResult
 
 CONDITION_LIMIT = 1e12
@@ -113,7 +114,7 @@ def diagnose(read: ReadResult) -> Diagnosis:
                 )
             )
     chained = np.zeros(max(graph.num_nodes - 1, 0), dtype=bool)
-    consecutive = np.abs(j - i) == 1
+    consecutive = odometry_mask(graph)
     chained[np.minimum(i, j)[consecutive]] = True
     breaks = np.flatnonzero(~chained)
     if breaks.size:

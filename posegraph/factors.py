@@ -60,9 +60,14 @@ def weighted_squares(residuals: np.ndarray, information: np.ndarray) -> np.ndarr
     return np.einsum("mi,mij,mj->m", residuals, information, residuals)
 
 
+def between_squares(values: LieGroup, edges: EdgeSet) -> np.ndarray:
+    """s = rᵀ Ω r of every between edge at ``values``."""
+    return weighted_squares(between_residuals(values, edges), edges.information)
+
+
 def chi2(values: LieGroup, edges: EdgeSet, priors: EdgeSet) -> float:
     """Σ rᵀ Ω r over between edges and priors (g2o's χ²); ``error`` is half of it."""
-    total = weighted_squares(between_residuals(values, edges), edges.information).sum()
+    total = between_squares(values, edges).sum()
     if len(priors):
         total += weighted_squares(prior_residuals(values, priors), priors.information).sum()
     return float(total)

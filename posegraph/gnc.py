@@ -22,7 +22,7 @@ import numpy as np
 
 from .chordal import chordal_values
 from .chordal import supports as supports_chordal
-from .factors import between_residuals, weighted_squares
+from .factors import between_squares
 from .graph import PoseGraph
 from .linear import NormalEquations
 from .robust import tls_gnc_weights
@@ -47,10 +47,6 @@ class GncOutcome:
     """Solver iterations over all stages."""
 
 
-def _squared(graph: PoseGraph, values) -> np.ndarray:
-    return weighted_squares(between_residuals(values, graph.edges), graph.edges.information)
-
-
 def _tls_objective(s: np.ndarray, mask: np.ndarray, width_sq: float) -> float:
     return float(np.where(mask, np.minimum(s, width_sq), s).sum())
 
@@ -62,7 +58,7 @@ def _stages(graph, mask, width_sq, options, start: Result, restart: bool):
         options, max_iterations=STAGE_ITERATIONS, relative_decrease=STAGE_RELATIVE_DECREASE
     )
     result, iterations, rounds = start, 0, 0
-    s = _squared(graph, result.values)
+    s = between_squares(result.values, graph.edges)
     weights = np.ones(graph.num_edges)
     largest = s[mask].max(initial=0.0)
     if largest <= width_sq:
@@ -83,7 +79,7 @@ def _stages(graph, mask, width_sq, options, start: Result, restart: bool):
         work.set_values(chordal_values(work) if restart else result.values)
         result = solve(work, stage, system=system)
         iterations += result.summary.num_iterations
-        s = _squared(graph, result.values)
+        s = between_squares(result.values, graph.edges)
         if rounds > 1 and np.all((weights[mask] < 1e-6) | (weights[mask] > 1.0 - 1e-6)):
             break
         mu *= MU_FACTOR
@@ -105,7 +101,7 @@ def gnc_tls(
             graph, mask, width_sq, options, start, restart
         )
         rounds, iterations = rounds + stage_rounds, iterations + stage_iterations
-        objective = _tls_objective(_squared(graph, result.values), mask, width_sq)
+        objective = _tls_objective(between_squares(result.values, graph.edges), mask, width_sq)
         if objective < best_objective:
             best, best_objective = (result, weights), objective
     result, weights = best
@@ -121,7 +117,7 @@ def gnc_tls(
             work.set_values(result.values)
         result = solve(work, options)
         iterations += result.summary.num_iterations
-        consistent = ~mask | (_squared(graph, result.values) <= width_sq)
+        consistent = ~mask | (between_squares(result.values, graph.edges) <= width_sq)
         if np.array_equal(consistent, kept):
             break
         kept = consistent

@@ -26,7 +26,7 @@ INITIALIZERS = ("auto", "file", "odometry", "spanning-tree", "chordal")
 
 def choose(graph: PoseGraph) -> str:
     """What ``auto`` picks: chordal relaxation when the graph has loops and its group has it
-    (SE2, SE3), else odometry composition (on a tree every initialiser gives the same values)."""
+    (SE2, SE3, Sim3), else odometry composition (on a tree every initialiser gives the same values)."""
     from .chordal import supports
 
     loops = graph.num_edges - graph.num_nodes + int(graph.components().max(initial=-1)) + 1

@@ -21,6 +21,7 @@ from matplotlib.collections import LineCollection  # noqa: E402
 from mpl_toolkits.mplot3d.art3d import Line3DCollection  # noqa: E402
 
 from .graph import PoseGraph  # noqa: E402
+from .initialization import odometry_mask  # noqa: E402
 from .lie import SE2  # noqa: E402
 from .trajectory_io import as_se3  # noqa: E402
 
@@ -93,7 +94,7 @@ def plot_graphs(
     figure, axes = _new_axes(three_d)
     for k, (label, graph) in enumerate(graphs):
         positions = as_se3(graph.values).translation
-        loop = np.abs(graph.edges.j - graph.edges.i) != 1
+        loop = ~odometry_mask(graph)
         loops = _segments(positions, graph.edges.i[loop], graph.edges.j[loop])
         count = int(loop.sum())
         _draw(

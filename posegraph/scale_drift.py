@@ -26,6 +26,7 @@ from .graph import PoseGraph
 from .lie import SE3, Sim3
 from .lifting import default_scale_information, lift_information, lift_se3
 from .solvers import Result, SolverOptions
+from .trajectory_io import as_se3
 
 CONVENTIONS = ("world_from_camera", "camera_from_world")
 
@@ -74,7 +75,7 @@ def convert_convention(poses: SE3, convention: str) -> SE3:
 def sim3_to_se3(values: Sim3, convention: str = "world_from_camera") -> SE3:
     """Corrected SE3 poses of Sim3 nodes S_w_c: the rotation is kept and the position is the
     similarity's translation (the camera centre); returned in ``convention``."""
-    return convert_convention(SE3(values.rotation, values.translation), convention)
+    return convert_convention(as_se3(values), convention)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -98,15 +98,15 @@ def _check_information(rows: Rows, measurements, information, checker: LineCheck
     bad = ~(smallest > 0)
     if not bad.any():
         return rows, measurements, information
-    checker.keep_good(
+    kept = checker.keep_good(
         rows,
         bad,
         lambda k: f"information matrix is not positive definite (λ_min = {smallest[k]:.3g})",
     )
-    return rows.subset(~bad), measurements[~bad], information[~bad]
+    return kept, measurements[~bad], information[~bad]
 
 
-def _convert(tag: str, spec: TagFormat, rows: Rows, options: ReadOptions, checker, collected):
+def _convert(spec: TagFormat, rows: Rows, options: ReadOptions, checker, collected):
     columns = spec.quaternion.get(rows.numbers.shape[1])
     if columns is not None:
         norms = np.linalg.norm(rows.numbers[:, columns], axis=1)
@@ -179,7 +179,7 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
         spec = ALL_TAGS[tag]
         rows = to_rows(tag, entries, spec.widths, spec.id_columns, checker)
         if rows is not None:
-            _convert(tag, spec, rows, options, checker, collected)
+            _convert(spec, rows, options, checker, collected)
 
     if group is Sim3:
         _lift_se3_records(collected, options.scale_information)
