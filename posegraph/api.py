@@ -82,8 +82,9 @@ def optimize(
 
     rejected = np.zeros(0, dtype=np.int64)
     if robust is None:
-        result = solve(graph, options, callback, system=_cached_system(graph, options))
-        graph.normal_equations = (_structure_key(graph, options), result.system)
+        system, previous = _cached_system(graph, options)
+        result = solve(graph, options, callback, system=system, previous=previous)
+        graph.last_result = (_structure_key(graph, options), result)
     else:
         mask = robust_mask(graph, robust_edges)
         name, _, width_text = robust.partition(":")
@@ -133,8 +134,12 @@ def _structure_key(graph: PoseGraph, options: SolverOptions) -> tuple:
 
 
 def _cached_system(graph: PoseGraph, options: SolverOptions):
-    """The last call's normal equations, if the graph's structure has not changed since."""
-    if graph.normal_equations is None:
-        return None
-    key, system = graph.normal_equations
-    return system if key == _structure_key(graph, options) else None
+    """(system, previous result): the last call's normal equations if the graph's structure
+    has not changed since (else None, and the solver grows them if the graph only grew), and
+    the last call's result (its linearisation is reused where it still holds)."""
+    if graph.last_result is None:
+        return None, None
+    (version, backend), result = graph.last_result
+    if backend != options.linear_solver:
+        return None, None
+    return (result.system if version == graph.structure_version else None), result

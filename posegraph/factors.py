@@ -28,6 +28,14 @@ class Linearization:
     jac_i: np.ndarray | None
     jac_j: np.ndarray
 
+    def extended(self, other: Linearization) -> Linearization:
+        """This linearisation followed by ``other``'s edges."""
+        return Linearization(
+            np.concatenate([self.residuals, other.residuals]),
+            None if self.jac_i is None else np.concatenate([self.jac_i, other.jac_i]),
+            np.concatenate([self.jac_j, other.jac_j]),
+        )
+
 
 def between_residuals(values: LieGroup, edges: EdgeSet) -> np.ndarray:
     """r = Log(Z⁻¹ Xᵢ⁻¹ Xⱼ) for every between edge."""

@@ -48,6 +48,17 @@ class EdgeSet:
             np.concatenate([self.information, other.information]),
         )
 
+    def starts_with(self, other: EdgeSet) -> bool:
+        """Whether the first ``len(other)`` edges are exactly ``other``'s."""
+        count = len(other)
+        return (
+            count <= len(self)
+            and np.array_equal(self.i[:count], other.i)
+            and np.array_equal(self.j[:count], other.j)
+            and np.array_equal(self.information[:count], other.information)
+            and self.measurements[:count].same_as(other.measurements)
+        )
+
     def subset(self, keep: np.ndarray) -> EdgeSet:
         return EdgeSet(self.i[keep], self.j[keep], self.measurements[keep], self.information[keep])
 
@@ -69,8 +80,9 @@ class PoseGraph:
         """Which nodes have values (nodes added without one get them when optimised)."""
         self.optimized = False
         """Whether ``posegraph.optimize`` left its solution in ``values`` (warm starts)."""
-        self.normal_equations = None
-        """The last optimisation's ``NormalEquations`` and the structure it was built for."""
+        self.last_result = None
+        """The last ``posegraph.optimize`` result and the structure it was solved for: warm
+        starts reuse its normal equations and linearisation."""
         self.equivalences = np.zeros((0, 2), dtype=np.int64)
         """TORO ``EQUIV`` pairs of node ids: kept for round trips, not constraints (as gtsam)."""
         self._index_of: dict[int, int] = {}

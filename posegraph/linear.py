@@ -25,7 +25,10 @@ from .sparse_cholesky import make_cholesky
 class BlockPattern:
     """The block pattern of Σₑ Jₑᵀ Wₑ Jₑ for edges i → j (and unary priors) over free nodes.
 
-    ``block_of`` maps each node to its block index, or −1 for a held node.
+    ``block_of`` maps each node to its block index, or −1 for a held node. ``previous`` is a
+    pattern built for the same edges and priors before more nodes, edges and priors were
+    appended. If its nodes kept their blocks, it is grown instead of rebuilt (``self.grown``):
+    only the appended edges' blocks are located and merged into its sorted block list.
     """
 
     def __init__(
@@ -37,20 +40,115 @@ class BlockPattern:
         d: int,
         backend: str = "auto",
         for_covariance: bool = False,
+        previous: BlockPattern | None = None,
     ) -> None:
         self.d = d
         self.block_of = block_of
         self.num_blocks = int(block_of.max(initial=-1)) + 1
         self.size = self.num_blocks * d
         a, b, p = block_of[edge_i], block_of[edge_j], block_of[prior_i]
-        both = (a >= 0) & (b >= 0)
-        nb = max(self.num_blocks, 1)
-        # Block keys col·nb + row, sorted: the order of blocks in CSC (by column, then row).
-        low, high = np.minimum(a[both], b[both]), np.maximum(a[both], b[both])
+        # Every edge contributes blocks (a, a), (b, b), (a, b), (b, a); every prior (p, p).
+        self.grown = previous is not None and previous._grows_into(block_of, a, b, p, d)
+        self._ends = (a, b, p)
+        if self.grown:
+            block_keys, edge_blocks, prior_blocks = self._grow(previous, a, b, p)
+        else:
+            block_keys, edge_blocks, prior_blocks = self._locate(a, b, p)
+        self._block_keys, self._edge_blocks = block_keys, edge_blocks
+        self._prior_blocks = prior_blocks
+        block_positions = self._layout(block_keys)
+
+        # Stacked block order: H_ii, H_jj, H_ij, H_ji of every edge, then every prior's. Blocks
+        # touching a held node (index −1) select the last row: the trash slot after ``data``.
+        with_trash = np.concatenate([block_positions, np.full((1, d * d), self.nnz)])
+        stacked = np.concatenate([edge_blocks.ravel(), prior_blocks])
+        self._block_positions = with_trash[stacked].ravel()
+
+        within = np.arange(d)
+
+        def vector_positions(blocks: np.ndarray) -> np.ndarray:
+            return np.where(blocks[:, None] >= 0, blocks[:, None] * d + within, self.size).ravel()
+
+        # Stacked vector order: the i part of every edge, the j part, then every prior's.
+        self._vector_positions = np.concatenate(
+            [vector_positions(a), vector_positions(b), vector_positions(p)]
+        )
+        self.cholesky = make_cholesky(
+            self.indices,
+            self.indptr,
+            self.size,
+            backend,
+            for_covariance,
+            previous.cholesky if self.grown else None,
+        )
+
+    def _keys(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """Block keys col·nb + row (CSC order: by column, then row); −1 where a node is held."""
+        return np.where((rows >= 0) & (cols >= 0), cols * max(self.num_blocks, 1) + rows, -1)
+
+    def _edge_keys(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """(4, m) keys of the blocks (a, a), (b, b), (a, b), (b, a) of edges a → b."""
+        return np.stack([self._keys(a, a), self._keys(b, b), self._keys(a, b), self._keys(b, a)])
+
+    def _locate(self, a, b, p):
+        """Sorted distinct block keys (every diagonal block, every edge and prior block) and the
+        index among them of each edge block (4, m) and prior block (−1 where held)."""
+        edge_keys, prior_keys = self._edge_keys(a, b), self._keys(p, p)
         diagonal = np.arange(self.num_blocks)
         block_keys = np.unique(
-            np.concatenate([diagonal * (nb + 1), high * nb + low, low * nb + high])
+            np.concatenate([self._keys(diagonal, diagonal), edge_keys[2:].ravel(), prior_keys])
         )
+        block_keys = block_keys[block_keys >= 0]
+
+        def index(keys: np.ndarray) -> np.ndarray:
+            return np.where(keys >= 0, np.searchsorted(block_keys, keys), -1)
+
+        return block_keys, index(edge_keys), index(prior_keys)
+
+    def _grows_into(self, block_of, a, b, p, d: int) -> bool:
+        """Whether nodes' blocks ``block_of`` and edge (a → b) and prior (p) blocks extend this
+        pattern's: its nodes, edges and priors come first, unchanged."""
+        return (
+            d == self.d
+            and np.array_equal(block_of[: self.block_of.size], self.block_of)
+            and all(
+                np.array_equal(new[: old.size], old)
+                for new, old in zip((a, b, p), self._ends, strict=True)
+            )
+        )
+
+    def _grow(self, previous: BlockPattern, a, b, p):
+        """``_locate`` for a graph that grew from ``previous``'s: its keys (re-encoded for the
+        new block count) are kept, the appended edges' new keys are inserted in order, and old
+        block indices shift by the number of keys inserted before them."""
+        old_edges, old_priors = previous._edge_blocks.shape[1], previous._prior_blocks.size
+        old_cols, old_rows = np.divmod(previous._block_keys, max(previous.num_blocks, 1))
+        old_keys = self._keys(old_rows, old_cols)
+        new_keys, new_edge_blocks, new_prior_blocks = self._locate(
+            a[old_edges:], b[old_edges:], p[old_priors:]
+        )
+        found = np.minimum(np.searchsorted(old_keys, new_keys), max(old_keys.size - 1, 0))
+        added = new_keys[old_keys[found] != new_keys] if old_keys.size else new_keys
+        inserted_at = np.searchsorted(old_keys, added)
+        block_keys = np.insert(old_keys, inserted_at, added)
+        shift = np.searchsorted(inserted_at, np.arange(old_keys.size), side="right")
+
+        def moved(blocks: np.ndarray) -> np.ndarray:
+            return np.where(blocks >= 0, blocks + shift[blocks], -1)
+
+        def located(blocks: np.ndarray) -> np.ndarray:
+            return np.where(blocks >= 0, np.searchsorted(block_keys, new_keys[blocks]), -1)
+
+        edge_blocks = np.concatenate(
+            [moved(previous._edge_blocks), located(new_edge_blocks)], axis=1
+        )
+        prior_blocks = np.concatenate([moved(previous._prior_blocks), located(new_prior_blocks)])
+        return block_keys, edge_blocks, prior_blocks
+
+    def _layout(self, block_keys: np.ndarray) -> np.ndarray:
+        """Set the CSC ``indptr``, ``indices`` and diagonal positions for the sorted block keys;
+        returns the positions in ``data`` of each block's d² entries (row-major)."""
+        d, nb = self.d, max(self.num_blocks, 1)
         block_cols, block_rows = np.divmod(block_keys, nb)
         blocks_per_col = np.bincount(block_cols, minlength=self.num_blocks)
         first_block_of_col = np.concatenate([[0], np.cumsum(blocks_per_col)[:-1]])
@@ -67,31 +165,10 @@ class BlockPattern:
         self.indices[block_positions] = np.broadcast_to(
             (block_rows * d)[:, None, None] + within[None, :, None], (block_keys.size, d, d)
         ).reshape(-1, d * d)
+        diagonal = np.arange(self.num_blocks)
         diagonal_blocks = block_positions[np.searchsorted(block_keys, diagonal * (nb + 1))]
         self.diagonal_positions = diagonal_blocks[:, within * d + within].ravel()
-
-        trash = self.nnz
-        held_block = np.full((1, d * d), trash)
-
-        def positions(r: np.ndarray, c: np.ndarray) -> np.ndarray:
-            valid = (r >= 0) & (c >= 0)
-            found = np.searchsorted(block_keys, np.where(valid, c * nb + r, 0))
-            located = block_positions[np.minimum(found, block_keys.size - 1)]
-            return np.where(valid[:, None], located, held_block)
-
-        # Stacked block order: H_ii, H_jj, H_ij, H_ji of every edge, then every prior's.
-        self._block_positions = np.concatenate(
-            [positions(a, a), positions(b, b), positions(a, b), positions(b, a), positions(p, p)]
-        ).ravel()
-
-        def vector_positions(blocks: np.ndarray) -> np.ndarray:
-            return np.where(blocks[:, None] >= 0, blocks[:, None] * d + within, self.size).ravel()
-
-        # Stacked vector order: the i part of every edge, the j part, then every prior's.
-        self._vector_positions = np.concatenate(
-            [vector_positions(a), vector_positions(b), vector_positions(p)]
-        )
-        self.cholesky = make_cholesky(self.indices, self.indptr, self.size, backend, for_covariance)
+        return block_positions
 
     @property
     def nnz(self) -> int:
@@ -139,7 +216,9 @@ class NormalEquations(BlockPattern):
         held: np.ndarray,
         backend: str = "auto",
         for_covariance: bool = False,
+        previous: NormalEquations | None = None,
     ) -> None:
+        """``previous``: see ``BlockPattern``; the system of this graph before it grew."""
         self.dof = graph.group.dof
         block_of = free_block_index(graph.num_nodes, held)
         self.free_nodes = np.flatnonzero(block_of >= 0)
@@ -151,6 +230,7 @@ class NormalEquations(BlockPattern):
             self.dof,
             backend,
             for_covariance,
+            previous,
         )
 
     def assemble(

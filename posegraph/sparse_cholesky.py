@@ -26,22 +26,66 @@ class CholmodCholesky:
     name = "cholmod"
 
     def __init__(
-        self, indices: np.ndarray, indptr: np.ndarray, size: int, supernodal: bool = False
+        self,
+        indices: np.ndarray,
+        indptr: np.ndarray,
+        size: int,
+        supernodal: bool = False,
+        previous: CholmodCholesky | None = None,
     ) -> None:
         """``supernodal`` forces an LLᵀ factor (CHOLMOD may otherwise pick LDLᵀ), which
-        ``covariance_blocks`` needs."""
+        ``covariance_blocks`` needs. ``previous`` is a factoriser for a leading part of this
+        pattern (see ``_lower_pattern``)."""
         from cvxopt import cholmod, matrix, spmatrix
 
         self._cholmod, self._matrix, self._spmatrix = cholmod, matrix, spmatrix
         self.size = size
         columns = np.repeat(np.arange(size), np.diff(indptr))
-        self._a = spmatrix(
-            matrix(np.ones(indices.size)), matrix(indices), matrix(columns), (size, size)
+        # CHOLMOD reads the lower triangle only (uplo="L"): passing just that halves the
+        # triplets cvxopt sorts into its matrix and the values copied per factorisation.
+        self._lower = np.flatnonzero(indices >= columns)
+        self._a = self._lower_pattern(indices[self._lower], columns[self._lower], previous)
+        saved = dict(cholmod.options)
+        if supernodal:
+            cholmod.options["supernodal"] = 2
+        try:
+            self._factor = cholmod.symbolic(self._a)
+        finally:
+            cholmod.options.clear()
+            cholmod.options.update(saved)
+
+    def _lower_pattern(self, rows: np.ndarray, columns: np.ndarray, previous):
+        """The cvxopt matrix of the lower-triangle pattern (ones). If ``previous`` holds its
+        leading n₀ × n₀ part unchanged (a graph that grew by appended nodes and edges between
+        them or to old nodes), the new rows and columns are concatenated to it, which skips
+        cvxopt's triplet sort of the whole pattern."""
+        from cvxopt import sparse
+
+        size, matrix = self.size, self._matrix
+
+        def spmatrix(r: np.ndarray, c: np.ndarray, shape: tuple[int, int]):
+            return self._spmatrix(1.0, matrix(r, tc="i"), matrix(c, tc="i"), shape)
+
+        n0 = previous.size if previous is not None else 0
+        old = (rows < n0) & (columns < n0)
+        if not (0 < n0 <= size and np.count_nonzero(old) == previous._lower.size):
+            return spmatrix(rows, columns, (size, size))
+        # ``sparse`` drops explicit zeros; previous's values are placeholders between
+        # factorisations, so they are set to ones.
+        previous._a.V = matrix(1.0, (previous._lower.size, 1))
+        below, right, k = ~old & (columns < n0), columns >= n0, size - n0
+        return sparse(
+            [
+                [previous._a, spmatrix(rows[below] - n0, columns[below], (k, n0))],
+                [
+                    spmatrix(rows[:0], rows[:0], (n0, k)),
+                    spmatrix(rows[right] - n0, columns[right] - n0, (k, k)),
+                ],
+            ]
         )
-        self._factor = cholmod.symbolic(self._a)
 
     def factorize(self, data: np.ndarray) -> None:
-        self._a.V = self._matrix(data)
+        self._a.V = self._matrix(data[self._lower])
         try:
             self._cholmod.numeric(self._a, self._factor)
         except ArithmeticError as error:
@@ -152,9 +196,11 @@ def make_cholesky(
     size: int,
     backend: str = "auto",
     for_covariance: bool = False,
+    previous=None,
 ):
     """A factoriser for the symmetric CSC pattern (both triangles stored, sorted indices);
-    ``for_covariance`` prepares it for ``covariance_blocks``."""
+    ``for_covariance`` prepares it for ``covariance_blocks``. ``previous``, a factoriser of
+    the same backend for a pattern this one grew from, may speed up the set-up."""
     if backend == "auto":
         backend = available_backends()[0]
     if backend not in BACKENDS:
@@ -163,5 +209,6 @@ def make_cholesky(
     if backend not in available_backends():
         raise ValueError(f"backend {backend!r} is not available here (is cvxopt installed?)")
     if backend == "cholmod":
-        return CholmodCholesky(indices, indptr, size, supernodal=for_covariance)
+        grown_from = previous if isinstance(previous, CholmodCholesky) else None
+        return CholmodCholesky(indices, indptr, size, for_covariance, grown_from)
     return ScipyCholesky(indices, indptr, size)

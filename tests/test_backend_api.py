@@ -64,6 +64,10 @@ def test_warm_starts_reuse_the_solution_and_then_the_structure():
     assert summaries[0].initialization != "warm start"
     assert all(s.initialization == "warm start" for s in summaries[1:])
     assert all(s.reused and s.reused[0].startswith("previous solution") for s in summaries[1:])
+    # Each step only appended nodes and edges: the pattern grows and the edges solved in the
+    # previous call keep their linearisation (their nodes did not move since).
+    assert all("sparsity pattern (grown)" in s.reused for s in summaries[1:])
+    assert all(any(r.startswith("linearization of") for r in s.reused) for s in summaries[1:])
     scratch = posegraph.optimize(full.copy()).summary.final_error
     assert summaries[-1].final_error == pytest.approx(scratch, rel=1e-6)
     assert np.mean([s.num_iterations for s in summaries[1:]]) < np.mean(
@@ -82,12 +86,22 @@ def test_unchanged_structure_reuses_pattern_and_symbolic_factorization():
         "sparsity pattern" in second.summary.reused
         and "symbolic factorization" in second.summary.reused
     )
+    assert not any(r.startswith("linearization") for r in second.summary.reused)  # nodes moved
     assert second.summary.final_error == pytest.approx(first.summary.final_error, rel=1e-6)
+    again = posegraph.optimize(graph)  # nothing changed: the last linearisation still holds
+    assert f"linearization of {graph.num_edges} edges" in again.summary.reused
+    assert again.summary.final_error == pytest.approx(second.summary.final_error, rel=1e-9)
     graph.add_edge(
         graph.node_ids[0], graph.node_ids[30], graph.values[0].between(graph.values[30]), np.eye(3)
     )
     third = posegraph.optimize(graph)
     assert "sparsity pattern" not in third.summary.reused  # the structure changed
+    assert "sparsity pattern (grown)" in third.summary.reused  # by an appended edge
+    graph.remove_edges([graph.num_edges - 1])
+    fourth = posegraph.optimize(graph)
+    assert not any(r.startswith("sparsity pattern") for r in fourth.summary.reused)
+    assert not any(r.startswith("linearization") for r in fourth.summary.reused)
+    assert fourth.summary.final_error == pytest.approx(first.summary.final_error, rel=1e-6)
 
 
 def test_marginals_are_blocks_of_the_inverse_information():

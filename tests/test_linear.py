@@ -82,3 +82,56 @@ def test_pattern_holds_one_block_per_node_and_edge_pair():
     free, d = 9, 6
     chain_pairs = 8  # edges between two free nodes
     assert system.nnz == (free + 2 * chain_pairs) * d * d
+
+
+def _grown(graph, seed: int, old_to_old: bool):
+    """``graph`` with 6 nodes appended, joined to each other and to old nodes, and a prior;
+    with ``old_to_old`` also a new edge between two old nodes."""
+    rng = np.random.default_rng(seed)
+    grown = graph.copy()
+    d, old = graph.group.dof, graph.node_ids
+    new = np.arange(6) + old.max() + 1
+    grown.add_nodes(new, graph.group.exp(0.3 * rng.normal(size=(6, d))))
+    i = np.concatenate([new[:-1], new[[0, 3]], old[1:2] if old_to_old else []])
+    j = np.concatenate([new[1:], old[[2, 7]], old[-1:] if old_to_old else []])
+    measured = graph.group.exp(0.3 * rng.normal(size=(i.size, d)))
+    grown.add_edges(i, j, measured, np.eye(d) * 3.0)
+    grown.add_priors(new[:1], measured[:1], np.eye(d))
+    return grown
+
+
+@pytest.mark.parametrize("old_to_old", [False, True], ids=["appended", "with-old-loop"])
+@pytest.mark.parametrize("backend", available_backends())
+def test_a_grown_pattern_equals_one_built_afresh(backend, old_to_old):
+    graph = random_graph(POSE_GROUPS[1], 12, 6, seed=8, priors=1)
+    held = np.array([0, 4])
+    previous = NormalEquations(graph, held, backend)
+    grown = _grown(graph, 9, old_to_old)
+    system = NormalEquations(grown, held, backend, previous=previous)
+    fresh = NormalEquations(grown, held, backend)
+    assert system.grown and not fresh.grown
+    for name in ("indptr", "indices", "diagonal_positions"):
+        np.testing.assert_array_equal(getattr(system, name), getattr(fresh, name))
+    lin = linearize_between(grown.values, grown.edges)
+    prior_lin = linearize_priors(grown.values, grown.priors)
+    data, gradient = system.assemble(
+        lin, grown.edges.information, prior_lin, grown.priors.information
+    )
+    expected_h, expected_g = _dense_system(grown, held)
+    np.testing.assert_allclose(system.matrix(data).toarray(), expected_h, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(gradient, expected_g, rtol=1e-12, atol=1e-9)
+    system.factorize(data)
+    np.testing.assert_allclose(
+        system.solve(-gradient), np.linalg.solve(expected_h, -expected_g), rtol=1e-8
+    )
+
+
+def test_a_pattern_is_rebuilt_when_the_graph_did_not_only_grow():
+    graph = random_graph(POSE_GROUPS[0], 12, 6, seed=10)
+    held = np.array([0])
+    previous = NormalEquations(graph, held)
+    shrunk = graph.copy()
+    shrunk.remove_edges([3])
+    assert not NormalEquations(shrunk, held, previous=previous).grown
+    assert not NormalEquations(graph, np.array([1]), previous=previous).grown  # other gauge
+    assert NormalEquations(graph, held, previous=previous).grown  # nothing appended

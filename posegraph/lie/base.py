@@ -105,6 +105,12 @@ class LieGroup(ABC):
     def __repr__(self) -> str:
         return f"{type(self).__name__}(batch_shape={self.batch_shape})"
 
+    def same_as(self, other: LieGroup) -> bool:
+        """Whether ``other`` stores exactly the same elements (bit for bit)."""
+        return type(other) is type(self) and all(
+            np.array_equal(getattr(self, n), getattr(other, n)) for n in self._event_ndims
+        )
+
     # ------------------------------------------------------------------ group-specific API
     @classmethod
     @abstractmethod

@@ -56,13 +56,31 @@ class EdgeWeighting(Protocol):
 
 class _Linearized:
     """Residuals, Jacobians and error ½ (Σ ρ(s) + Σ s_prior) of the whole graph at some values,
-    and the between edges' information weighted for IRLS."""
+    and the between edges' information weighted for IRLS.
 
-    def __init__(self, graph: PoseGraph, values: LieGroup, weighting: EdgeWeighting | None) -> None:
-        self.values = values
-        self.between: Linearization = linearize_between(values, graph.edges)
+    ``previous``, a linearisation of this graph before edges were appended, is reused for its
+    edges if their nodes still have the values it was taken at (a warm start).
+    """
+
+    def __init__(
+        self,
+        graph: PoseGraph,
+        values: LieGroup,
+        weighting: EdgeWeighting | None,
+        previous: _Linearized | None = None,
+    ) -> None:
+        self.values, self.edges = values, graph.edges
+        reused = previous is not None and previous._holds_for(graph.edges, values)
+        self.reused_edges = len(previous.edges) if reused else 0
+        appended = graph.edges.subset(slice(self.reused_edges, None))
+        between = linearize_between(values, appended)
+        squared = weighted_squares(between.residuals, appended.information)
+        if reused:
+            between = previous.between.extended(between)
+            squared = np.concatenate([previous.squared, squared])
+        self.between: Linearization = between
+        self.squared = squared
         self.priors: Linearization = linearize_priors(values, graph.priors)
-        self.squared = weighted_squares(self.between.residuals, graph.edges.information)
         prior_total = weighted_squares(self.priors.residuals, graph.priors.information).sum()
         if weighting is None:
             self.information = graph.edges.information
@@ -72,6 +90,15 @@ class _Linearized:
             self.information = graph.edges.information * weights[:, None, None]
             self.error = 0.5 * float(cost.sum() + prior_total)
 
+    def _holds_for(self, edges, values: LieGroup) -> bool:
+        """Whether this linearisation is that of the first edges of ``edges`` at ``values``."""
+        count = len(self.values)
+        return (
+            count <= len(values)
+            and edges.starts_with(self.edges)
+            and values[:count].same_as(self.values)
+        )
+
 
 def optimize(
     graph: PoseGraph,
@@ -79,12 +106,16 @@ def optimize(
     callback: Callback | None = None,
     system: NormalEquations | None = None,
     weighting: EdgeWeighting | None = None,
+    previous: Result | None = None,
 ) -> Result:
     """Minimise ½ Σ rᵀΩr over the graph's free nodes, starting from ``graph.values``.
 
     The gauge is ``graph.gauge_nodes()`` (fixed nodes, or the lowest id of each component
     without a prior). ``system`` passes in a ``NormalEquations`` built earlier for the same
-    structure, to reuse its pattern and symbolic factorisation. ``weighting`` makes the cost
+    structure, to reuse its pattern and symbolic factorisation. ``previous``, the result of
+    an earlier call on this graph, warm-starts: its pattern is grown if the graph grew by
+    appending, and its linearisation is reused where the graph's edges and values are
+    unchanged (least squares only). ``weighting`` makes the cost
     robust (``posegraph.robust.Robustifier``) or weighs edges (IRLS with its weights re-evaluated
     at every linearisation). The graph is not modified.
     """
@@ -92,12 +123,20 @@ def optimize(
     clock = _Clock()
     reused = []
     if system is None:
-        system = NormalEquations(graph, graph.gauge_nodes(), options.linear_solver)
+        grow_from = None if previous is None else previous.system
+        system = NormalEquations(
+            graph, graph.gauge_nodes(), options.linear_solver, False, grow_from
+        )
+        if system.grown:
+            reused = ["sparsity pattern (grown)"]
     else:
         reused = ["sparsity pattern", "symbolic factorization"]
 
     clock.lap("other")
-    current = _Linearized(graph, graph.values, weighting)
+    last = None if previous is None or weighting is not None else previous.linearization
+    current = _Linearized(graph, graph.values, weighting, last)
+    if current.reused_edges:
+        reused.append(f"linearization of {current.reused_edges} edges")
     clock.lap("linearize")
     initial_error = current.error
     history: list[IterationRecord] = []
@@ -123,7 +162,7 @@ def optimize(
         num_variables=system.size,
         reused=reused,
     )
-    return Result(current.values, summary, system)
+    return Result(current.values, summary, system, current)
 
 
 def _iterate(graph, options, callback, system, weighting, clock, current, history):
@@ -221,4 +260,13 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
         )
         diagonal = system.diagonal(data)
         clock.lap("assemble")
+        if damping_share < 1e-3:
+            # The Newton decrement ½ gᵀH⁻¹g at the new values, with H from the factorisation
+            # just used (its change over a converging step is second order): when it promises
+            # less than the tolerance, the run has converged without a new factorisation.
+            estimate = 0.5 * float(gradient @ system.solve(gradient))
+            clock.lap("solve")
+            if 0 <= estimate <= options.relative_decrease * current.error:
+                termination, converged = "predicted error decrease below tolerance", True
+                break
     return current, termination, converged

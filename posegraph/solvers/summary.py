@@ -95,3 +95,5 @@ class Result:
     summary: Summary
     system: object = dataclasses.field(default=None, repr=False, compare=False)
     """The ``NormalEquations`` used (pattern and symbolic factorisation), for reuse."""
+    linearization: object = dataclasses.field(default=None, repr=False, compare=False)
+    """The residuals and Jacobians at ``values``, for reuse by a warm start."""
