@@ -117,16 +117,20 @@ def _initialize_new_nodes(graph: PoseGraph, options: SolverOptions) -> None:
     a spanning tree, then refine them alone (solved nodes held) over the edges that touch them,
     so that the full solve starts close to its optimum."""
     new = ~graph.initialized
-    local = graph.with_edges(new[graph.edges.i] | new[graph.edges.j])
-    local.fixed = ~new
-    local.priors = local.priors.subset(new[local.priors.i])
-    local.set_values(spanning_tree_values(local, known=~new))
+    touching = new[graph.edges.i] | new[graph.edges.j]
+    involved = new.copy()
+    involved[graph.edges.i[touching]] = involved[graph.edges.j[touching]] = True
+    local = graph.subgraph(involved, edges=touching)
+    solved = ~new[involved]
+    local.fixed = solved
+    local.priors = local.priors.subset(~solved[local.priors.i])
+    local.set_values(spanning_tree_values(local, known=solved))
     # The local problem is small: SuperLU's start-up is cheaper than CHOLMOD's.
     local_options = dataclasses.replace(
         options, relative_decrease=LOCAL_RELATIVE_DECREASE, linear_solver="scipy"
     )
     refined = solve(local, local_options)
-    graph.set_values(refined.values)
+    graph.set_values(graph.values.set_at(np.flatnonzero(new), refined.values[~solved]))
 
 
 def _structure_key(graph: PoseGraph, options: SolverOptions) -> tuple:

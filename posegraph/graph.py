@@ -212,6 +212,27 @@ class PoseGraph:
         other.structure_version += 1
         return other
 
+    def subgraph(self, nodes: np.ndarray, edges: np.ndarray | None = None) -> PoseGraph:
+        """The nodes where the mask ``nodes`` holds (in order, with their values, fixed flags
+        and priors) and the between edges joining two of them (only those where the mask
+        ``edges`` holds, if given)."""
+        index = np.full(self.num_nodes, -1, dtype=np.int64)
+        index[nodes] = np.arange(np.count_nonzero(nodes))
+        inside = (index[self.edges.i] >= 0) & (index[self.edges.j] >= 0)
+        kept = self.edges.subset(inside if edges is None else inside & edges)
+        priors = self.priors.subset(index[self.priors.i] >= 0)
+        other = PoseGraph(self.group)
+        other.node_ids = self.node_ids[nodes]
+        other.values = self.values[nodes]
+        other.fixed = self.fixed[nodes]
+        other.initialized = self.initialized[nodes]
+        other._index_of = dict(zip(other.node_ids.tolist(), range(other.num_nodes), strict=True))
+        other.edges = dataclasses.replace(kept, i=index[kept.i], j=index[kept.j])
+        other.priors = dataclasses.replace(priors, i=index[priors.i])
+        inside_pairs = np.isin(self.equivalences, other.node_ids).all(axis=1)
+        other.equivalences = self.equivalences[inside_pairs]
+        return other
+
     def add_prior(self, node_id: int, measurement, information) -> int:
         """Add one prior (see ``add_priors``); returns its index."""
         return int(self.add_priors([node_id], measurement, information)[0])

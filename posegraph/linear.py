@@ -6,7 +6,8 @@ the CSC pattern of a matrix with one d × d block per free node and per pair of 
 by an edge (both triangles stored), where every edge block's d² entries land in the CSC ``data``
 array, and the symbolic Cholesky factorisation. Assembling then takes a single ``np.bincount``
 over stacked edge blocks; blocks that touch a held node go to a trash slot. No Python loop runs
-over edges.
+over edges. A graph that grew by appended nodes, edges and priors gets its pattern by merging the
+new blocks into the old pattern's sorted block list (a warm start), not by sorting them all again.
 
 ``NormalEquations`` uses it with d = dof for ``H = Σ Jᵀ Ω J`` and ``g = Σ Jᵀ Ω r``; the chordal
 initialisation uses it with d = 2 or 3 for its linear systems.

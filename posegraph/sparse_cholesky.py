@@ -1,7 +1,8 @@
 """Sparse Cholesky backends for a fixed sparsity pattern: analyse once, factorise many times.
 
-* ``cholmod``: SuiteSparse CHOLMOD through the cvxopt wheel (supernodal, AMD ordering). The
-  fastest measured here: ≈ 40 ms per factorisation of sphere2500's 15000 × 15000 Hessian.
+* ``cholmod``: SuiteSparse CHOLMOD through the cvxopt wheel (supernodal, AMD ordering), given
+  the lower triangle. The fastest measured here: ≈ 20–40 ms per factorisation of sphere2500's
+  15000 × 15000 Hessian.
 * ``scipy``: SuperLU in symmetric mode with a minimum-degree ordering computed once and reused
   (``permc_spec="NATURAL"`` on the pre-permuted matrix). Pure scipy, always available.
 

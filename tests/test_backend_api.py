@@ -8,7 +8,7 @@ from posegraph_datasets.generators import manhattan_world
 
 import posegraph
 from posegraph.benchmarks.incremental import stream
-from posegraph.factors import linearize_between, linearize_priors
+from posegraph.factors import between_squares, linearize_between, linearize_priors
 from posegraph.graph import PoseGraph
 from posegraph.lie import SE2, SE3
 from posegraph.linear import NormalEquations
@@ -36,6 +36,31 @@ def test_batch_and_single_editing_with_arrays():
         graph.add_node(3, values[0])
     with pytest.raises(TypeError):
         graph.add_node(12, SE2.identity())
+
+
+def test_a_subgraph_keeps_its_nodes_in_order_with_the_edges_among_them():
+    graph = random_graph(SE2, 10, 6, seed=79, priors=3)
+    graph.fix(graph.node_ids[[4]])
+    nodes = np.zeros(10, dtype=bool)
+    nodes[[1, 2, 4, 7, 8]] = True
+    sub = graph.subgraph(nodes)
+    np.testing.assert_array_equal(sub.node_ids, graph.node_ids[nodes])
+    assert sub.values.same_as(graph.values[nodes])
+    assert sub.fixed.tolist() == [False, False, True, False, False]
+    inside = nodes[graph.edges.i] & nodes[graph.edges.j]
+    ids = graph.node_ids
+    expected = set(zip(ids[graph.edges.i[inside]], ids[graph.edges.j[inside]], strict=True))
+    assert set(zip(sub.node_ids[sub.edges.i], sub.node_ids[sub.edges.j], strict=True)) == expected
+    # The same edges with the same values: the same residuals.
+    np.testing.assert_array_equal(
+        between_squares(sub.values, sub.edges),
+        between_squares(graph.values, graph.edges.subset(inside)),
+    )
+    prior_inside = nodes[graph.priors.i]
+    np.testing.assert_array_equal(sub.node_ids[sub.priors.i], ids[graph.priors.i[prior_inside]])
+    chosen = np.zeros(graph.num_edges, dtype=bool)
+    chosen[np.flatnonzero(inside)[:2]] = True
+    assert sub.num_edges > 2 and graph.subgraph(nodes, edges=chosen).num_edges == 2
 
 
 def test_nodes_added_without_values_are_composed_from_their_edges():
