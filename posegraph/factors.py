@@ -59,6 +59,9 @@ def linearize_between(values: LieGroup, edges: EdgeSet) -> Linearization:
 
 def linearize_priors(values: LieGroup, priors: EdgeSet) -> Linearization:
     """Residuals and Jacobians of every prior."""
+    if len(priors) == 0:
+        d = values.dof
+        return Linearization(np.zeros((0, d)), None, np.zeros((0, d, d)))
     residuals = prior_residuals(values, priors)
     return Linearization(residuals, None, values.jr_inv(residuals))
 

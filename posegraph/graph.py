@@ -86,6 +86,8 @@ class PoseGraph:
         self.equivalences = np.zeros((0, 2), dtype=np.int64)
         """TORO ``EQUIV`` pairs of node ids: kept for round trips, not constraints (as gtsam)."""
         self._index_of: dict[int, int] = {}
+        self._components: tuple | None = None
+        """(node count, edge end arrays, labels) of the last ``components`` call."""
         self.structure_version = 0
         """Incremented by every change that alters the sparsity pattern or the gauge."""
 
@@ -269,17 +271,25 @@ class PoseGraph:
         other.equivalences = self.equivalences.copy()
         other._index_of = dict(self._index_of)
         other.structure_version = self.structure_version
+        other._components = self._components
         return other
 
     # ------------------------------------------------------------------------ structure
     def components(self) -> np.ndarray:
-        """Connected-component label of every node (edges of either direction connect)."""
+        """Connected-component label of every node (edges of either direction connect); a
+        read-only array, cached while the nodes and the edges' end arrays stay the same."""
         from scipy.sparse import coo_matrix
         from scipy.sparse.csgraph import connected_components
 
-        n = self.num_nodes
-        adjacency = coo_matrix((np.ones(self.num_edges), (self.edges.i, self.edges.j)), (n, n))
-        return connected_components(adjacency, directed=False)[1]
+        n, i, j = self.num_nodes, self.edges.i, self.edges.j
+        cached = self._components
+        if cached is not None and cached[0] == n and cached[1] is i and cached[2] is j:
+            return cached[3]
+        adjacency = coo_matrix((np.ones(i.size), (i, j)), (n, n))
+        labels = connected_components(adjacency, directed=False)[1]
+        labels.flags.writeable = False
+        self._components = (n, i, j, labels)
+        return labels
 
     def gauge_nodes(self) -> np.ndarray:
         """Indices of the nodes held fixed when optimising (CONVENTIONS.md, "Gauge").

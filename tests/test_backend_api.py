@@ -38,6 +38,22 @@ def test_batch_and_single_editing_with_arrays():
         graph.add_node(12, SE2.identity())
 
 
+def test_components_follow_every_edit():
+    """``components`` is cached: each edit of nodes or edges must be seen."""
+    graph = PoseGraph(SE2)
+    graph.add_nodes([0, 1, 2, 3], SE2.identity((4,)))
+    graph.add_edges([0, 2], [1, 3], SE2.identity((2,)), np.eye(3))
+    assert len(set(graph.components())) == 2
+    graph.add_edge(1, 2, SE2.identity(), np.eye(3))
+    assert len(set(graph.components())) == 1
+    graph.add_node(4)
+    assert len(set(graph.components())) == 2
+    graph.remove_edges([2])
+    assert len(set(graph.components())) == 3
+    assert len(set(graph.with_edges(np.array([], dtype=int)).components())) == 5
+    assert not graph.components().flags.writeable
+
+
 def test_a_subgraph_keeps_its_nodes_in_order_with_the_edges_among_them():
     graph = random_graph(SE2, 10, 6, seed=79, priors=3)
     graph.fix(graph.node_ids[[4]])

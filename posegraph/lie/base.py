@@ -42,17 +42,24 @@ class LieGroup(ABC):
     """Number of trailing (non-batch) axes of each stored field."""
 
     def __post_init__(self) -> None:
-        for field in dataclasses.fields(self):
-            object.__setattr__(self, field.name, np.asarray(getattr(self, field.name), float))
+        for name in self._event_ndims:
+            object.__setattr__(self, name, np.asarray(getattr(self, name), float))
 
     # ----------------------------------------------------------------------------- storage
-    @property
-    def batch_shape(self) -> tuple[int, ...]:
-        """The broadcast shape of the leading batch axes."""
+    def _batch_shapes(self) -> list[tuple[int, ...]]:
+        """The leading batch axes of each stored field."""
         shapes = []
         for name, ndim in self._event_ndims.items():
             shape = getattr(self, name).shape
             shapes.append(shape[: len(shape) - ndim])
+        return shapes
+
+    @property
+    def batch_shape(self) -> tuple[int, ...]:
+        """The broadcast shape of the leading batch axes."""
+        shapes = self._batch_shapes()
+        if all(shape == shapes[0] for shape in shapes):
+            return shapes[0]
         return np.broadcast_shapes(*shapes)
 
     def __len__(self) -> int:
@@ -60,7 +67,10 @@ class LieGroup(ABC):
 
     def __getitem__(self: G, index) -> G:
         """Index the batch axes, like indexing an array of elements."""
-        batch = self.batch_shape
+        shapes = self._batch_shapes()
+        if all(shape == shapes[0] for shape in shapes):  # no broadcasting needed
+            return type(self)(**{name: getattr(self, name)[index] for name in self._event_ndims})
+        batch = np.broadcast_shapes(*shapes)
         fields = {}
         for name, ndim in self._event_ndims.items():
             value = getattr(self, name)
