@@ -12,6 +12,9 @@ consistency pass.
 3. Consistency: restart from the chordal relaxation of the kept (outlier-free) edges, solve least
    squares, keep every edge with s ≤ c² at the solution, and repeat until the kept set no longer
    changes. This re-admits true loops that an early, outlier-distorted stage had pushed out.
+4. Local search: for the kept loops with the largest residuals, re-solve without each one
+   (warm-started); leave it out if that lowers the TLS objective Σ min(s, c²). A false loop that
+   the solution bent itself to fit, a local minimum of that objective, is dropped this way.
 """
 
 from __future__ import annotations
@@ -32,6 +35,7 @@ from .solvers import optimize as solve
 MU_FACTOR = 1.4
 MAX_ROUNDS = 200
 MAX_CONSISTENCY_PASSES = 10
+LOCAL_SEARCH_CANDIDATES = 5
 STAGE_ITERATIONS = 10
 STAGE_RELATIVE_DECREASE = 1e-5
 
@@ -121,4 +125,18 @@ def gnc_tls(
         if np.array_equal(consistent, kept):
             break
         kept = consistent
+
+    s = between_squares(result.values, graph.edges)
+    objective = _tls_objective(s, mask, width_sq)
+    candidates = np.flatnonzero(mask & kept)
+    for edge in candidates[np.argsort(-s[candidates])][:LOCAL_SEARCH_CANDIDATES]:
+        without = kept.copy()
+        without[edge] = False
+        work = graph.with_edges(without)
+        work.set_values(result.values)
+        trial = solve(work, options)
+        iterations += trial.summary.num_iterations
+        trial_objective = _tls_objective(between_squares(trial.values, graph.edges), mask, width_sq)
+        if trial_objective < objective:
+            kept, result, objective = without, trial, trial_objective
     return GncOutcome(result, np.flatnonzero(~kept), rounds, iterations)
