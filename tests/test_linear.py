@@ -42,12 +42,9 @@ def _dense_system(graph, held):
     return hessian, gradient
 
 
-@pytest.mark.parametrize("backend", available_backends())
-@pytest.mark.parametrize("group", POSE_GROUPS, ids=lambda g: g.__name__)
-def test_assembly_and_solve_match_dense(group, backend):
-    graph = random_graph(group, 12, 8, seed=5, priors=2)
-    held = np.array([0, 5])
-    system = NormalEquations(graph, held, backend)
+def _assert_matches_dense(system, graph, held, damping: float) -> np.ndarray:
+    """H and g assembled by ``system`` equal the dense ones, and so does the solution of
+    (H + damping·I) δ = −g, which is returned."""
     lin = linearize_between(graph.values, graph.edges)
     prior_lin = linearize_priors(graph.values, graph.priors)
     data, gradient = system.assemble(
@@ -56,12 +53,20 @@ def test_assembly_and_solve_match_dense(group, backend):
     expected_h, expected_g = _dense_system(graph, held)
     np.testing.assert_allclose(system.matrix(data).toarray(), expected_h, rtol=1e-12, atol=1e-9)
     np.testing.assert_allclose(gradient, expected_g, rtol=1e-12, atol=1e-9)
-    damping = np.full(system.size, 0.5)
-    system.factorize(data, damping)
+    system.factorize(data, np.full(system.size, damping))
     step = system.solve(-gradient)
-    np.testing.assert_allclose(
-        step, np.linalg.solve(expected_h + 0.5 * np.eye(system.size), -expected_g), rtol=1e-8
-    )
+    expected_step = np.linalg.solve(expected_h + damping * np.eye(system.size), -expected_g)
+    np.testing.assert_allclose(step, expected_step, rtol=1e-8)
+    return step
+
+
+@pytest.mark.parametrize("backend", available_backends())
+@pytest.mark.parametrize("group", POSE_GROUPS, ids=lambda g: g.__name__)
+def test_assembly_and_solve_match_dense(group, backend):
+    graph = random_graph(group, 12, 8, seed=5, priors=2)
+    held = np.array([0, 5])
+    system = NormalEquations(graph, held, backend)
+    step = _assert_matches_dense(system, graph, held, 0.5)
     assert system.scatter(step, graph.num_nodes)[held].sum() == 0
 
 
@@ -112,18 +117,7 @@ def test_a_grown_pattern_equals_one_built_afresh(backend, old_to_old):
     assert system.grown and not fresh.grown
     for name in ("indptr", "indices", "diagonal_positions"):
         np.testing.assert_array_equal(getattr(system, name), getattr(fresh, name))
-    lin = linearize_between(grown.values, grown.edges)
-    prior_lin = linearize_priors(grown.values, grown.priors)
-    data, gradient = system.assemble(
-        lin, grown.edges.information, prior_lin, grown.priors.information
-    )
-    expected_h, expected_g = _dense_system(grown, held)
-    np.testing.assert_allclose(system.matrix(data).toarray(), expected_h, rtol=1e-12, atol=1e-9)
-    np.testing.assert_allclose(gradient, expected_g, rtol=1e-12, atol=1e-9)
-    system.factorize(data)
-    np.testing.assert_allclose(
-        system.solve(-gradient), np.linalg.solve(expected_h, -expected_g), rtol=1e-8
-    )
+    _assert_matches_dense(system, grown, held, 0.0)
 
 
 def test_a_pattern_is_rebuilt_when_the_graph_did_not_only_grow():
