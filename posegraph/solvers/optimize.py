@@ -72,7 +72,8 @@ class _Linearized:
         self.values, self.edges = values, graph.edges
         reused = previous is not None and previous._holds_for(graph.edges, values)
         self.reused_edges = len(previous.edges) if reused else 0
-        appended = graph.edges.subset(slice(self.reused_edges, None))
+        # Without reuse, every edge is "appended" (and the edge set is not copied).
+        appended = graph.edges.subset(slice(self.reused_edges, None)) if reused else graph.edges
         between = linearize_between(values, appended)
         squared = weighted_squares(between.residuals, appended.information)
         if reused:
@@ -125,7 +126,7 @@ def optimize(
     if system is None:
         grow_from = None if previous is None else previous.system
         system = NormalEquations(
-            graph, graph.gauge_nodes(), options.linear_solver, False, grow_from
+            graph, graph.gauge_nodes(), options.linear_solver, previous=grow_from
         )
         if system.grown:
             reused = ["sparsity pattern (grown)"]
