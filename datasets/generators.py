@@ -6,16 +6,36 @@
   shape), with loop closures between neighbouring rings.
 
 Both return the graph, with initial values from composing the noisy odometry, and the truth.
+``resimulate`` gives any graph a known ground truth: it keeps the graph's edges and information
+and draws new measurements around chosen true poses.
 Measurements are Z = (Xᵢ⁻¹ Xⱼ) · Exp(n), n ~ N(0, Σ), with information Σ⁻¹ (CONVENTIONS.md).
 """
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
+from posegraph.factors import information_root
 from posegraph.graph import PoseGraph
 from posegraph.lie import SE2, SE3, LieGroup
 from posegraph.lie.so3 import exp_matrix
+
+
+def noisy_measurements(
+    truth: LieGroup,
+    i: np.ndarray,
+    j: np.ndarray,
+    information: np.ndarray,
+    rng: np.random.Generator,
+) -> LieGroup:
+    """Z = (Xᵢ⁻¹ Xⱼ) · Exp(n) with n ~ N(0, Ω⁻¹) for each edge's (d, d) information Ω, full or
+    diagonal: n = Ω^-½ z with z ~ N(0, I) (a diagonal Ω scales z by its σ in place); directions
+    of zero information get no noise (an infinite variance cannot be drawn)."""
+    z = rng.normal(size=(i.size, type(truth).dof))
+    noise = np.einsum("mab,mb->ma", information_root(information, inverse=True), z)
+    return truth[i].between(truth[j]).retract(noise)
 
 
 def _noisy_graph(
@@ -28,9 +48,8 @@ def _noisy_graph(
     """The graph of edges i → j measured with noise of standard deviations ``sigmas``,
     initialised by composing the noisy odometry edges (k → k+1), which must come first."""
     group = type(truth)
-    noise = rng.normal(size=(i.size, group.dof)) * sigmas
-    measurements = truth[i].between(truth[j]).retract(noise)
     information = np.broadcast_to(np.diag(1.0 / sigmas**2), (i.size, group.dof, group.dof))
+    measurements = noisy_measurements(truth, i, j, information, rng)
     count = truth.batch_shape[0]
     initial = [truth[0]]
     for k in range(count - 1):  # the odometry edges are the first count − 1
@@ -39,6 +58,21 @@ def _noisy_graph(
     graph.add_nodes(np.arange(count), group.stack(initial))
     graph.add_edges(i, j, measurements, information)
     return graph
+
+
+def resimulate(graph: PoseGraph, truth: LieGroup, seed: int) -> PoseGraph:
+    """A copy of ``graph`` whose between measurements are drawn anew around the poses ``truth``
+    (one per node) with the noise the graph's own information matrices state, so that
+    ``truth`` is its ground truth. Nodes, fixed nodes, priors and information are kept; the
+    node values become ``truth``, marked as not optimised (an initialiser replaces them)."""
+    rng = np.random.default_rng(seed)
+    edges = graph.edges
+    measurements = noisy_measurements(truth, edges.i, edges.j, edges.information, rng)
+    simulated = graph.copy()
+    simulated.edges = dataclasses.replace(edges, measurements=measurements)
+    simulated.set_values(truth)
+    simulated.optimized = False
+    return simulated
 
 
 def manhattan_world(

@@ -66,6 +66,22 @@ def linearize_priors(values: LieGroup, priors: EdgeSet) -> Linearization:
     return Linearization(residuals, None, values.jr_inv(residuals))
 
 
+def information_root(information: np.ndarray, inverse: bool = False) -> np.ndarray:
+    """The symmetric square root W = Ω^½ of each (d, d) information matrix (W W = Ω), or with
+    ``inverse`` the root of its pseudo-inverse, Ω^-½, which is zero along directions of zero
+    information. From Ω = V diag(w) Vᵀ: W = V diag(w^±½) Vᵀ."""
+    eigenvalues, eigenvectors = np.linalg.eigh(information)
+    root = np.sqrt(eigenvalues.clip(min=0.0))
+    if inverse:
+        root = np.divide(
+            1.0,
+            root,
+            out=np.zeros_like(root),
+            where=root > 1e-12 * root.max(axis=-1, keepdims=True),
+        )
+    return (eigenvectors * root[..., None, :]) @ np.swapaxes(eigenvectors, -1, -2)
+
+
 def weighted_squares(residuals: np.ndarray, information: np.ndarray) -> np.ndarray:
     """rᵀ Ω r of every edge."""
     return np.einsum("mi,mij,mj->m", residuals, information, residuals)

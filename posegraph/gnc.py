@@ -12,9 +12,11 @@ consistency pass.
 3. Consistency: restart from the chordal relaxation of the kept (outlier-free) edges, solve least
    squares, keep every edge with s ≤ c² at the solution, and repeat until the kept set no longer
    changes. This re-admits true loops that an early, outlier-distorted stage had pushed out.
-4. Local search: for the kept loops with the largest residuals, re-solve without each one
+4. Local search: for the kept loops with the largest deleted residuals d² (``posegraph.leverage``:
+   what leaving the loop out would save, to first order), re-solve without each one
    (warm-started); leave it out if that lowers the TLS objective Σ min(s, c²). A false loop that
-   the solution bent itself to fit, a local minimum of that objective, is dropped this way.
+   the solution bent itself to fit, a local minimum of that objective, has a small residual s
+   but a large d², and is dropped this way. Repeat while a round drops a loop.
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from .chordal import chordal_values
 from .chordal import supports as supports_chordal
 from .factors import between_squares
 from .graph import PoseGraph
+from .leverage import deleted_residuals
 from .linear import NormalEquations
 from .robust import tls_gnc_weights
 from .solvers import Result, SolverOptions
@@ -36,6 +39,7 @@ MU_FACTOR = 1.4
 MAX_ROUNDS = 200
 MAX_CONSISTENCY_PASSES = 10
 LOCAL_SEARCH_CANDIDATES = 5
+LOCAL_SEARCH_ROUNDS = 3
 STAGE_ITERATIONS = 10
 STAGE_RELATIVE_DECREASE = 1e-5
 
@@ -128,15 +132,24 @@ def gnc_tls(
 
     s = between_squares(result.values, graph.edges)
     objective = _tls_objective(s, mask, width_sq)
-    candidates = np.flatnonzero(mask & kept)
-    for edge in candidates[np.argsort(-s[candidates])][:LOCAL_SEARCH_CANDIDATES]:
-        without = kept.copy()
-        without[edge] = False
-        work = graph.with_edges(without)
-        work.set_values(result.values)
-        trial = solve(work, options)
-        iterations += trial.summary.num_iterations
-        trial_objective = _tls_objective(between_squares(trial.values, graph.edges), mask, width_sq)
-        if trial_objective < objective:
-            kept, result, objective = without, trial, trial_objective
+    for _ in range(LOCAL_SEARCH_ROUNDS):
+        scores = np.zeros(graph.num_edges)
+        scores[kept] = deleted_residuals(
+            graph.with_edges(kept), result.values, linear_solver=options.linear_solver
+        )
+        candidates = np.flatnonzero(mask & kept & (scores > 0.5 * width_sq))
+        dropped = False
+        for edge in candidates[np.argsort(-scores[candidates])][:LOCAL_SEARCH_CANDIDATES]:
+            without = kept.copy()
+            without[edge] = False
+            work = graph.with_edges(without)
+            work.set_values(result.values)
+            trial = solve(work, options)
+            iterations += trial.summary.num_iterations
+            s = between_squares(trial.values, graph.edges)
+            trial_objective = _tls_objective(s, mask, width_sq)
+            if trial_objective < objective:
+                kept, result, objective, dropped = without, trial, trial_objective, True
+        if not dropped:
+            break
     return GncOutcome(result, np.flatnonzero(~kept), rounds, iterations)

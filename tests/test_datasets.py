@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from posegraph_datasets import EXAMPLES_DIR, example
-from posegraph_datasets.generators import manhattan_world, sphere
+from posegraph_datasets.generators import manhattan_world, resimulate, sphere
 from posegraph_datasets.make_examples import example_texts
 
+from posegraph.factors import between_residuals
 from posegraph.solvers import optimize
 
 
@@ -40,3 +43,24 @@ def test_optimum_recovers_the_ground_truth(generate):
     assert error_after < 0.3 * error_before
     dof = graph.num_edges * graph.group.dof - (graph.num_nodes - 1) * graph.group.dof
     assert result.summary.final_chi2 == pytest.approx(dof, rel=0.2)  # χ² ≈ its degrees of freedom
+
+
+def test_resimulate_draws_each_edge_with_its_full_information():
+    """Whitened by a random, correlated information matrix per edge, the residuals of the
+    resimulated measurements at the truth are standard normal: mean 0, covariance I."""
+    graph, truth = manhattan_world(num_poses=3000, seed=1)
+    rng = np.random.default_rng(7)
+    factors = rng.normal(size=(graph.num_edges, 3, 3))
+    information = 100 * (factors @ np.swapaxes(factors, 1, 2) + 0.1 * np.eye(3))  # σ < 0.4 rad
+    graph.edges = dataclasses.replace(graph.edges, information=information)
+    simulated = resimulate(graph, truth, seed=5)
+    np.testing.assert_array_equal(simulated.edges.i, graph.edges.i)
+    np.testing.assert_array_equal(simulated.edges.information, graph.edges.information)
+    residuals = between_residuals(truth, simulated.edges)
+    cholesky = np.linalg.cholesky(simulated.edges.information)  # Ω = L Lᵀ: Lᵀr ~ N(0, I)
+    whitened = np.einsum("mji,mj->mi", cholesky, residuals)
+    tolerance = 5 / np.sqrt(graph.num_edges)
+    np.testing.assert_allclose(whitened.mean(axis=0), 0, atol=tolerance)
+    np.testing.assert_allclose(np.cov(whitened.T), np.eye(3), atol=2 * tolerance)
+    again = resimulate(graph, truth, seed=5).edges.measurements.translation
+    np.testing.assert_array_equal(again, simulated.edges.measurements.translation)
