@@ -16,7 +16,8 @@ consistency pass.
    what leaving the loop out would save, to first order), re-solve without each one
    (warm-started); leave it out if that lowers the TLS objective Σ min(s, c²). A false loop that
    the solution bent itself to fit, a local minimum of that objective, has a small residual s
-   but a large d², and is dropped this way. Repeat while a round drops a loop.
+   but a large d², and is dropped this way. Repeat (up to ``LOCAL_SEARCH_ROUNDS``) while a round
+   drops a loop.
 """
 
 from __future__ import annotations
@@ -130,13 +131,14 @@ def gnc_tls(
             break
         kept = consistent
 
-    s = between_squares(result.values, graph.edges)
-    objective = _tls_objective(s, mask, width_sq)
+    objective = _tls_objective(between_squares(result.values, graph.edges), mask, width_sq)
     for _ in range(LOCAL_SEARCH_ROUNDS):
         scores = np.zeros(graph.num_edges)
         scores[kept] = deleted_residuals(
             graph.with_edges(kept), result.values, linear_solver=options.linear_solver
         )
+        # Dropping a loop lowers the objective when d² > c²; below c²/2 the estimate's error
+        # (≈ 30%) cannot hide such a loop.
         candidates = np.flatnonzero(mask & kept & (scores > 0.5 * width_sq))
         dropped = False
         for edge in candidates[np.argsort(-scores[candidates])][:LOCAL_SEARCH_CANDIDATES]:
@@ -146,8 +148,8 @@ def gnc_tls(
             work.set_values(result.values)
             trial = solve(work, options)
             iterations += trial.summary.num_iterations
-            s = between_squares(trial.values, graph.edges)
-            trial_objective = _tls_objective(s, mask, width_sq)
+            trial_squares = between_squares(trial.values, graph.edges)
+            trial_objective = _tls_objective(trial_squares, mask, width_sq)
             if trial_objective < objective:
                 kept, result, objective, dropped = without, trial, trial_objective, True
         if not dropped:
