@@ -17,10 +17,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .factors import information_root, linearize_between, linearize_priors
+from .factors import information_root
 from .graph import PoseGraph
 from .lie import LieGroup
-from .linear import NormalEquations
+from .linear import factorized_information
 
 PROBES = 256
 """Probes for ranking. At 32 a leverage of 0.7 is off by ±0.08, and d² by up to two orders of
@@ -39,11 +39,7 @@ def deleted_residuals(
 ) -> np.ndarray:
     """Estimated d²ₑ of every between edge at ``values`` (see the module docstring)."""
     edges, d = graph.edges, graph.group.dof
-    between = linearize_between(values, edges)
-    priors = linearize_priors(values, graph.priors)
-    system = NormalEquations(graph, graph.gauge_nodes(), linear_solver)
-    data, _ = system.assemble(between, edges.information, priors, graph.priors.information)
-    system.factorize(data)
+    system, between = factorized_information(graph, values, linear_solver)
 
     root = information_root(edges.information)
     rows_i, rows_j = root @ between.jac_i, root @ between.jac_j

@@ -18,8 +18,9 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse
 
-from .factors import Linearization
+from .factors import Linearization, linearize_between, linearize_priors
 from .graph import PoseGraph
+from .lie import LieGroup
 from .sparse_cholesky import make_cholesky
 
 
@@ -268,3 +269,16 @@ class NormalEquations(BlockPattern):
         full = np.zeros((num_nodes, self.dof))
         full[self.free_nodes] = step.reshape(-1, self.dof)
         return full
+
+
+def factorized_information(
+    graph: PoseGraph, values: LieGroup, linear_solver: str = "auto", for_covariance: bool = False
+) -> tuple[NormalEquations, Linearization]:
+    """The information matrix H = Σ Jᵀ Ω J of ``graph`` at ``values`` (priors included, gauge
+    nodes held), assembled and factorised, with the between edges' linearisation."""
+    system = NormalEquations(graph, graph.gauge_nodes(), linear_solver, for_covariance)
+    between = linearize_between(values, graph.edges)
+    priors = linearize_priors(values, graph.priors)
+    data, _ = system.assemble(between, graph.edges.information, priors, graph.priors.information)
+    system.factorize(data)
+    return system, between

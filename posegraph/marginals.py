@@ -12,10 +12,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .factors import linearize_between, linearize_priors
 from .graph import PoseGraph
 from .lie import LieGroup
-from .linear import NormalEquations
+from .linear import factorized_information
 
 
 def marginals(
@@ -34,11 +33,7 @@ def marginals(
     values = graph.values if values is None else values
     index = graph.index(nodes)
     d = graph.group.dof
-    system = NormalEquations(graph, graph.gauge_nodes(), linear_solver, for_covariance=True)
-    between = linearize_between(values, graph.edges)
-    priors = linearize_priors(values, graph.priors)
-    data, _ = system.assemble(between, graph.edges.information, priors, graph.priors.information)
-    system.factorize(data)
+    system, _ = factorized_information(graph, values, linear_solver, for_covariance=True)
 
     blocks = system.block_of[index]
     free = np.flatnonzero(blocks >= 0)
