@@ -12,12 +12,16 @@ consistency pass.
 3. Consistency: restart from the chordal relaxation of the kept (outlier-free) edges, solve least
    squares, keep every edge with s ≤ c² at the solution, and repeat until the kept set no longer
    changes. This re-admits true loops that an early, outlier-distorted stage had pushed out.
-4. Local search: for the kept loops with the largest deleted residuals d² (``posegraph.leverage``:
-   what leaving the loop out would save, to first order), re-solve without each one
-   (warm-started); leave it out if that lowers the TLS objective Σ min(s, c²). A false loop that
-   the solution bent itself to fit, a local minimum of that objective, has a small residual s
-   but a large d², and is dropped this way. Repeat (up to ``LOCAL_SEARCH_ROUNDS``) while a round
-   drops a loop.
+4. Local search, in rounds (up to ``LOCAL_SEARCH_ROUNDS``) while a round changes the kept set:
+   - re-admit: the rejected loops whose innovation χ² against the solution is below c²
+     (``posegraph.leverage.innovations``) are added back together, and the kept set is settled
+     as in step 3 (warm-started). A region that drifted while its true loops were rejected fits
+     them badly (large s) but predicts the misfit (small innovation);
+   - drop: for the kept loops with the largest deleted residuals d² (``posegraph.leverage``:
+     what leaving the loop out would save, to first order), re-solve without each one
+     (warm-started). A false loop that the solution bent itself to fit has a small residual s
+     but a large d².
+   Each change is kept only if it lowers the TLS objective Σ min(s, c²).
 """
 
 from __future__ import annotations
@@ -30,7 +34,7 @@ from .chordal import chordal_values
 from .chordal import supports as supports_chordal
 from .factors import between_squares
 from .graph import PoseGraph
-from .leverage import deleted_residuals
+from .leverage import deleted_residuals, innovations
 from .linear import NormalEquations
 from .robust import tls_gnc_weights
 from .solvers import Result, SolverOptions
@@ -41,6 +45,9 @@ MAX_ROUNDS = 200
 MAX_CONSISTENCY_PASSES = 10
 LOCAL_SEARCH_CANDIDATES = 5
 LOCAL_SEARCH_ROUNDS = 3
+EXPLAINED = 0.75
+"""Re-admission: the share of a rejected loop's s that the other re-admitted loops must remove
+(a lone false loop's stays near 1 − 0 at first order; 0.56 was seen, from the nonlinearity)."""
 STAGE_ITERATIONS = 10
 STAGE_RELATIVE_DECREASE = 1e-5
 
@@ -115,43 +122,120 @@ def gnc_tls(
             best, best_objective = (result, weights), objective
     result, weights = best
 
-    kept = ~mask | (weights > 0.5)
-    for consistency_pass in range(MAX_CONSISTENCY_PASSES):
+    kept, result, settle_iterations = _settle(
+        graph, mask, ~mask | (weights > 0.5), result.values, width_sq, options, restart=True
+    )
+    iterations += settle_iterations
+    objective = _tls_objective(between_squares(result.values, graph.edges), mask, width_sq)
+    for _ in range(LOCAL_SEARCH_ROUNDS):
+        changed = False
+        for step in (_readmit, _drop):
+            trial_kept, trial, trial_iterations = step(graph, mask, kept, result, width_sq, options)
+            iterations += trial_iterations
+            if trial is None:
+                continue
+            trial_objective = _tls_objective(
+                between_squares(trial.values, graph.edges), mask, width_sq
+            )
+            if trial_objective < objective:
+                kept, result, objective, changed = trial_kept, trial, trial_objective, True
+        if not changed:
+            break
+    return GncOutcome(result, np.flatnonzero(~kept), rounds, iterations)
+
+
+def _settle(graph, mask, kept, values, width_sq, options, restart: bool):
+    """Least squares over the kept edges, then keep every edge with s ≤ c² at the solution;
+    repeat until the kept set no longer changes. Returns (kept, result, iterations). With
+    ``restart`` (SE2, SE3) the first solve starts from the chordal relaxation of the kept edges,
+    which escapes a basin that an early, outlier-distorted GNC stage may have led into."""
+    iterations, result = 0, None
+    for settle_pass in range(MAX_CONSISTENCY_PASSES):
         work = graph.with_edges(kept)
-        if consistency_pass == 0 and supports_chordal(graph.group):
-            # The kept edges are outlier-free: restart from their chordal relaxation, which
-            # escapes a basin that an early, outlier-distorted stage may have led into.
+        if settle_pass == 0 and restart and supports_chordal(graph.group):
             work.set_values(chordal_values(work))
         else:
-            work.set_values(result.values)
+            work.set_values(values)
         result = solve(work, options)
         iterations += result.summary.num_iterations
-        consistent = ~mask | (between_squares(result.values, graph.edges) <= width_sq)
+        values = result.values
+        consistent = ~mask | (between_squares(values, graph.edges) <= width_sq)
         if np.array_equal(consistent, kept):
             break
         kept = consistent
+    return kept, result, iterations
 
-    objective = _tls_objective(between_squares(result.values, graph.edges), mask, width_sq)
-    for _ in range(LOCAL_SEARCH_ROUNDS):
-        scores = np.zeros(graph.num_edges)
-        scores[kept] = deleted_residuals(
-            graph.with_edges(kept), result.values, linear_solver=options.linear_solver
-        )
-        # Dropping a loop lowers the objective when d² > c²; below c²/2 the estimate's error
-        # (≈ 30%) cannot hide such a loop.
-        candidates = np.flatnonzero(mask & kept & (scores > 0.5 * width_sq))
-        dropped = False
-        for edge in candidates[np.argsort(-scores[candidates])][:LOCAL_SEARCH_CANDIDATES]:
-            without = kept.copy()
-            without[edge] = False
-            work = graph.with_edges(without)
-            work.set_values(result.values)
-            trial = solve(work, options)
-            iterations += trial.summary.num_iterations
-            trial_squares = between_squares(trial.values, graph.edges)
-            trial_objective = _tls_objective(trial_squares, mask, width_sq)
-            if trial_objective < objective:
-                kept, result, objective, dropped = without, trial, trial_objective, True
-        if not dropped:
+
+def _readmit(graph, mask, kept, result, width_sq, options):
+    """Re-admit the rejected loops that the other re-admitted loops make consistent, and settle.
+
+    Candidates are the rejected loops whose innovation χ² against the solution is below c²
+    (``posegraph.leverage.innovations``): adding one alone would lower the TLS objective, to
+    first order. A region that drifted while its true loops were rejected fits them badly
+    (large s) but predicts the misfit (small innovation). So may a false loop between poorly
+    constrained poses, by chance. The candidates are solved for together, and a candidate
+    stays one only if the others explain it: its s at the joint solution fitted without it (its
+    exact deleted residual) is at most c², or at most ``1 − EXPLAINED`` of its s before. This
+    repeats over the remaining candidates until all are explained, then the kept set with them
+    is settled. The loops of a drifted region pull it back for each other; a lone false loop is
+    consistent only with the solution bent to fit it, and without it, its misfit is what it
+    was. Returns (kept, result or None, iterations)."""
+    rejected = np.flatnonzero(mask & ~kept)
+    if rejected.size == 0:
+        return kept, None, 0
+    innovation = innovations(
+        graph.with_edges(kept),
+        result.values,
+        graph.edges.subset(rejected),
+        linear_solver=options.linear_solver,
+    )
+    candidates = rejected[innovation < width_sq]
+    misfit = between_squares(result.values, graph.edges)
+    values, iterations = result.values, 0
+    for _ in range(MAX_CONSISTENCY_PASSES):
+        if candidates.size == 0:
+            return kept, None, iterations
+        with_candidates = kept.copy()
+        with_candidates[candidates] = True
+        work = graph.with_edges(with_candidates)
+        work.set_values(values)
+        joint = solve(work, options)
+        values, iterations = joint.values, iterations + joint.summary.num_iterations
+        position = np.cumsum(with_candidates) - 1  # of each edge in ``work``
+        squares = deleted_residuals(
+            work, values, edges=position[candidates], linear_solver=options.linear_solver
+        ).squares
+        explained = (squares <= width_sq) | (squares <= (1.0 - EXPLAINED) * misfit[candidates])
+        if explained.all():
             break
-    return GncOutcome(result, np.flatnonzero(~kept), rounds, iterations)
+        candidates = candidates[explained]
+    kept, settled, settle_iterations = _settle(
+        graph, mask, with_candidates, values, width_sq, options, restart=False
+    )
+    return kept, settled, iterations + settle_iterations
+
+
+def _drop(graph, mask, kept, result, width_sq, options):
+    """Leave out, one at a time, the kept loops of largest deleted residual d²
+    (``posegraph.leverage.deleted_residuals``), keeping each removal that lowers the TLS
+    objective. Returns (kept, result or None, iterations)."""
+    scores = np.zeros(graph.num_edges)
+    scores[kept] = deleted_residuals(
+        graph.with_edges(kept), result.values, linear_solver=options.linear_solver
+    ).innovation
+    # Dropping a loop lowers the objective when d² > c²; below c²/2 the estimate's error
+    # (≈ 30%) cannot hide such a loop.
+    candidates = np.flatnonzero(mask & kept & (scores > 0.5 * width_sq))
+    best, iterations = None, 0
+    objective = _tls_objective(between_squares(result.values, graph.edges), mask, width_sq)
+    for edge in candidates[np.argsort(-scores[candidates])][:LOCAL_SEARCH_CANDIDATES]:
+        without = kept.copy()
+        without[edge] = False
+        work = graph.with_edges(without)
+        work.set_values(result.values)
+        trial = solve(work, options)
+        iterations += trial.summary.num_iterations
+        trial_objective = _tls_objective(between_squares(trial.values, graph.edges), mask, width_sq)
+        if trial_objective < objective:
+            kept, result, objective, best = without, trial, trial_objective, trial
+    return kept, best, iterations

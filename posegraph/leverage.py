@@ -1,26 +1,39 @@
-"""Deleted residuals of between edges: which edges the solution bent itself to fit.
+"""What leaving an edge out, or adding one, does to a least-squares solution, to first order.
 
 Whiten each edge with Wₑ = Ωₑ^½: residual r̃ₑ = Wₑ rₑ and Jacobian rows Aₑ = Wₑ [∂r/∂δᵢ, ∂r/∂δⱼ].
-The hat matrix of the linearised problem is M = A H⁻¹ Aᵀ with H the information matrix (priors
-included). An edge's deleted residual, the squared size of its innovation against the solution
-without it, is d²ₑ = r̃ₑᵀ (I − Mₑₑ)⁻¹ r̃ₑ (Cook & Weisberg 1982, "Residuals and Influence in
-Regression", §2.2; Baarda's data snooping in geodesy). Removing the edge lowers the least-squares
-cost by d²ₑ (in χ² units) to first order. A false loop that the solution bent to fit has a small
-residual but Mₑₑ near I, hence a large d².
+H = AᵀA is the information matrix of the linearised problem (priors included).
 
-The diagonal blocks Mₑₑ are estimated from K Rademacher probes z, E[(Mz)ₑ zₑᵀ] = Mₑₑ (Bekas,
-Kokiopoulou & Saad 2007, "An estimator for the diagonal of a matrix"), with one K-column solve.
-For an entry, the estimate's variance is (Mₑₑ − Mₑₑ²)/K, which is small where Mₑₑ is near I.
+* An edge of the graph, with Mₑₑ = Aₑ H⁻¹ Aₑᵀ its block of the hat matrix: at the solution
+  fitted without it, its whitened residual is (I − Mₑₑ)⁻¹ r̃ₑ, and its innovation against that
+  solution is d²ₑ = r̃ₑᵀ (I − Mₑₑ)⁻¹ r̃ₑ (deleted residuals: Cook & Weisberg 1982, "Residuals
+  and Influence in Regression", §2.2; Baarda's data snooping in geodesy). Leaving the edge out
+  lowers the least-squares cost by d²ₑ (χ² units). A false loop that the solution bent to fit
+  has a small residual but Mₑₑ near I, hence a large d².
+* An edge not in the graph: its innovation χ², r̃ₑᵀ (I + Pₑ)⁻¹ r̃ₑ with Pₑ = Aₑ H⁻¹ Aₑᵀ, the
+  Mahalanobis size of its residual under the covariance Ωₑ⁻¹ + Jₑ Σ Jₑᵀ that the solution
+  predicts for it (the χ² gate of Kalman filtering). Adding the edge raises the cost by that
+  much (Sherman–Morrison–Woodbury). A true loop that a distorted solution fits badly has a
+  large residual but a large Pₑ, hence a small innovation.
+
+Both are estimated for all edges at once from K Rademacher probes z over the whitened rows and
+the one K-column solve w = H⁻¹ Aᵀ z. Mₑₑ from E[(A w)ₑ zₑᵀ] = Mₑₑ (Bekas, Kokiopoulou & Saad
+2007, "An estimator for the diagonal of a matrix"), whose variance per entry is (Mₑₑ − Mₑₑ²)/K;
+Pₑ from E[(Aₑ w)(Aₑ w)ᵀ] = Aₑ H⁻¹ (AᵀA) H⁻¹ Aₑᵀ = Pₑ, within ≈ √(2/K) relative. For a few
+chosen edges, Mₑₑ is exact from unit probes (d solves per edge): where Mₑₑ is near I, the
+estimate's error in I − Mₑₑ, squared in the deleted residual's s, can reach an order of
+magnitude.
 """
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
-from .factors import information_root
-from .graph import PoseGraph
+from .factors import Linearization, information_root, linearize_between, linearize_priors
+from .graph import EdgeSet, PoseGraph
 from .lie import LieGroup
-from .linear import factorized_information
+from .linear import NormalEquations, factorized_information
 
 PROBES = 256
 """Probes for ranking. At 32 a leverage of 0.7 is off by ±0.08, and d² by up to two orders of
@@ -30,44 +43,147 @@ SMALLEST_COMPLEMENT = 1e-3
 """Eigenvalues of I − Mₑₑ are clipped here: the estimate can reach 0 or below where Mₑₑ ≈ I."""
 
 
+@dataclasses.dataclass(frozen=True)
+class _Factored:
+    """H factorised at the graph's values, and the whitened rows of its edges and priors."""
+
+    system: NormalEquations
+    whitened: np.ndarray
+    """r̃ of every between edge."""
+    rows_i: np.ndarray
+    rows_j: np.ndarray
+    prior_rows: np.ndarray
+
+    def solve(self, pieces: list[np.ndarray]) -> np.ndarray:
+        """w = H⁻¹ Aᵀ z for each probe given by its pieces Aᵀz (stacked as for
+        ``BlockPattern.vector``): (num_nodes, d, K), zero on held nodes."""
+        rhs = np.stack([self.system.vector(piece) for piece in pieces], axis=1)
+        d = self.system.dof
+        w = np.zeros((self.system.block_of.size, d, len(pieces)))
+        w[self.system.free_nodes] = self.system.solve(rhs).reshape(-1, d, len(pieces))
+        return w
+
+    def rademacher(self, probes: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+        """Rademacher probes z of the between rows (K, m, d) and w = H⁻¹ Aᵀ z, the priors'
+        rows probed too."""
+        rng = np.random.default_rng(seed)
+        d = self.system.dof
+        z = rng.choice([-1.0, 1.0], size=(probes, len(self.whitened), d))
+        z_priors = rng.choice([-1.0, 1.0], size=(probes, len(self.prior_rows), d))
+
+        def transposed_times(rows: np.ndarray, probe: np.ndarray) -> np.ndarray:
+            return np.einsum("mba,mb->ma", rows, probe)
+
+        pieces = [
+            np.concatenate(
+                [
+                    transposed_times(self.rows_i, z[k]),
+                    transposed_times(self.rows_j, z[k]),
+                    transposed_times(self.prior_rows, z_priors[k]),
+                ]
+            )
+            for k in range(probes)
+        ]
+        return z, self.solve(pieces)
+
+    def units(self, edges: np.ndarray) -> np.ndarray:
+        """w = H⁻¹ Aₑᵀ for the given edges: (num_nodes, d, len(edges), d)."""
+        m, d = len(self.whitened), self.system.dof
+        pieces = []
+        for edge in edges:
+            for a in range(d):
+                piece = np.zeros((2 * m + len(self.prior_rows), d))
+                piece[edge], piece[m + edge] = self.rows_i[edge, a], self.rows_j[edge, a]
+                pieces.append(piece)
+        return self.solve(pieces).reshape(-1, d, len(edges), d)
+
+
+def _whitened(
+    between: Linearization, information: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """r̃ₑ and the rows Aₑ (the i and j parts) of every between edge."""
+    root = information_root(information)
+    return (
+        np.einsum("mab,mb->ma", root, between.residuals),
+        root @ between.jac_i,
+        root @ between.jac_j,
+    )
+
+
+def _factorize(graph: PoseGraph, values: LieGroup, linear_solver: str) -> _Factored:
+    system, between = factorized_information(graph, values, linear_solver)
+    prior_rows = (
+        information_root(graph.priors.information) @ linearize_priors(values, graph.priors).jac_j
+    )
+    return _Factored(system, *_whitened(between, graph.edges.information), prior_rows)
+
+
+def _eigen(whitened: np.ndarray, matrices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Eigenvalues λ of the symmetrised Bₑ, clipped at ``SMALLEST_COMPLEMENT``, and r̃ₑ in
+    their eigenbasis: r̃ₑᵀ Bₑ⁻ᵏ r̃ₑ = Σ projected² / λᵏ."""
+    eigenvalues, eigenvectors = np.linalg.eigh(0.5 * (matrices + np.swapaxes(matrices, 1, 2)))
+    projected = np.einsum("mba,mb->ma", eigenvectors, whitened)
+    return eigenvalues.clip(min=SMALLEST_COMPLEMENT), projected
+
+
+@dataclasses.dataclass(frozen=True)
+class DeletedResiduals:
+    """Of between edges, against the solution fitted without each (first order)."""
+
+    innovation: np.ndarray
+    """d²ₑ = r̃ₑᵀ (I − Mₑₑ)⁻¹ r̃ₑ: what leaving the edge out saves."""
+    squares: np.ndarray
+    """‖(I − Mₑₑ)⁻¹ r̃ₑ‖²: the edge's s = rᵀΩr at that solution."""
+
+
 def deleted_residuals(
     graph: PoseGraph,
     values: LieGroup,
+    edges: np.ndarray | None = None,
+    probes: int = PROBES,
+    seed: int = 0,
+    linear_solver: str = "auto",
+) -> DeletedResiduals:
+    """Deleted residuals at ``values`` (see the module docstring): exact for the between edges
+    indexed by ``edges``, or estimated for all from ``probes`` Rademacher probes."""
+    factored = _factorize(graph, values, linear_solver)
+    i, j = graph.edges.i, graph.edges.j
+    if edges is None:
+        z, w = factored.rademacher(probes, seed)
+        hat_z = factored.rows_i @ w[i] + factored.rows_j @ w[j]  # (m, d, K): (A w)ₑ
+        hat = hat_z @ np.moveaxis(z, 0, 2).swapaxes(1, 2) / probes  # Σₖ (A w)ₑ zₑᵀ / K
+        whitened = factored.whitened
+    else:
+        edges = np.asarray(edges, dtype=np.int64)
+        w = factored.units(edges)
+        chosen = np.arange(edges.size)
+        hat = (
+            factored.rows_i[edges] @ w[i[edges], :, chosen]
+            + factored.rows_j[edges] @ w[j[edges], :, chosen]
+        )  # Aₑ H⁻¹ Aₑᵀ
+        whitened = factored.whitened[edges]
+    eigenvalues, projected = _eigen(whitened, np.eye(graph.group.dof) - hat)
+    return DeletedResiduals(
+        (projected**2 / eigenvalues).sum(axis=1), (projected**2 / eigenvalues**2).sum(axis=1)
+    )
+
+
+def innovations(
+    graph: PoseGraph,
+    values: LieGroup,
+    candidates: EdgeSet,
     probes: int = PROBES,
     seed: int = 0,
     linear_solver: str = "auto",
 ) -> np.ndarray:
-    """Estimated d²ₑ of every between edge at ``values`` (see the module docstring)."""
-    edges, d = graph.edges, graph.group.dof
-    system, between = factorized_information(graph, values, linear_solver)
-
-    root = information_root(edges.information)
-    rows_i, rows_j = root @ between.jac_i, root @ between.jac_j
-    z = np.random.default_rng(seed).choice([-1.0, 1.0], size=(probes, len(edges), d))
-    no_priors = np.zeros((len(graph.priors), d))
-    transposed_i, transposed_j = np.swapaxes(rows_i, 1, 2), np.swapaxes(rows_j, 1, 2)
-    rhs = np.stack(
-        [
-            system.vector(
-                np.concatenate(
-                    [
-                        np.einsum("mab,mb->ma", transposed_i, probe),
-                        np.einsum("mab,mb->ma", transposed_j, probe),
-                        no_priors,
-                    ]
-                )
-            )
-            for probe in z
-        ],
-        axis=1,
+    """Estimated innovation χ² of each edge of ``candidates`` (edges over ``graph``'s nodes that
+    it does not hold) against ``graph``'s solution ``values`` (see the module docstring)."""
+    factored = _factorize(graph, values, linear_solver)
+    _, w = factored.rademacher(probes, seed)
+    whitened, rows_i, rows_j = _whitened(
+        linearize_between(values, candidates), candidates.information
     )
-    solution = np.zeros((graph.num_nodes, d, probes))
-    solution[system.free_nodes] = system.solve(rhs).reshape(-1, d, probes)
-    hat_z = rows_i @ solution[edges.i] + rows_j @ solution[edges.j]  # (m, d, K): (M z)ₑ
-    hat = hat_z @ np.moveaxis(z, 0, 2).swapaxes(1, 2) / probes  # Σₖ (M z)ₑ zₑᵀ / K
-    hat = 0.5 * (hat + np.swapaxes(hat, 1, 2))
-
-    eigenvalues, eigenvectors = np.linalg.eigh(np.eye(d) - hat)
-    whitened = np.einsum("mab,mb->ma", root, between.residuals)
-    projected = np.einsum("mba,mb->ma", eigenvectors, whitened)
-    return (projected**2 / eigenvalues.clip(min=SMALLEST_COMPLEMENT)).sum(axis=1)
+    samples = rows_i @ w[candidates.i] + rows_j @ w[candidates.j]  # (m, d, K)
+    predicted = samples @ np.swapaxes(samples, 1, 2) / probes
+    eigenvalues, projected = _eigen(whitened, np.eye(graph.group.dof) + predicted)
+    return (projected**2 / eigenvalues).sum(axis=1)

@@ -1,4 +1,4 @@
-"""Deleted residuals against what leaving each edge out actually does."""
+"""Deleted residuals and innovations against what leaving out or adding an edge actually does."""
 
 from __future__ import annotations
 
@@ -6,30 +6,77 @@ import numpy as np
 import pytest
 from posegraph_datasets.generators import manhattan_world, sphere
 
+from posegraph.factors import between_squares
 from posegraph.initialization import odometry_mask
-from posegraph.leverage import deleted_residuals
+from posegraph.leverage import deleted_residuals, innovations
+from posegraph.lie import SE3
 from posegraph.solvers import SolverOptions, optimize
 from posegraph.sparse_cholesky import available_backends
 
+from .conftest import random_graph
 
-@pytest.mark.parametrize("backend", available_backends())
-@pytest.mark.parametrize(
-    "graph",
-    [manhattan_world(num_poses=150, seed=2)[0], sphere(rings=4, poses_per_ring=10, seed=2)[0]],
-    ids=["SE2", "SE3"],
-)
-def test_deleted_residual_is_the_cost_that_leaving_the_edge_out_saves(graph, backend):
-    """At the optimum, d²ₑ (estimated with many probes) equals χ²(all edges) − χ²(without e)
-    from re-solving without e, up to the estimate's sampling error and the nonlinearity."""
+GRAPHS = {
+    "SE2": lambda: manhattan_world(num_poses=150, seed=2)[0],
+    "SE3": lambda: sphere(rings=4, poses_per_ring=10, seed=2)[0],
+    "SE3-priors": lambda: random_graph(SE3, 40, 20, seed=3, noise=0.2, priors=3),
+}
+pytestmark = [
+    pytest.mark.parametrize("backend", available_backends()),
+    pytest.mark.parametrize("make_graph", GRAPHS.values(), ids=GRAPHS.keys()),
+]
+
+
+def _loops(graph):
+    return np.flatnonzero(~odometry_mask(graph))[:8]
+
+
+def test_deleted_residual_is_the_cost_that_leaving_the_edge_out_saves(make_graph, backend):
+    """At the optimum, against re-solving without edge e: d²ₑ equals χ²(all edges) −
+    χ²(without e), estimated with many probes and exactly for chosen edges; and the exact
+    predicted s of e equals its s at the re-solved optimum. Up to the estimate's sampling error
+    and the nonlinearity."""
+    graph = make_graph()
     options = SolverOptions(linear_solver=backend)
     solution = optimize(graph, options)
+    loops = _loops(graph)
     estimated = deleted_residuals(
         graph, solution.values, probes=10000, seed=1, linear_solver=backend
     )
-    for edge in np.flatnonzero(~odometry_mask(graph))[:8]:
+    exact = deleted_residuals(graph, solution.values, edges=loops, linear_solver=backend)
+    for k, edge in enumerate(loops):
         keep = np.ones(graph.num_edges, dtype=bool)
         keep[edge] = False
         without = graph.with_edges(keep)
         without.set_values(solution.values)
-        saved = solution.summary.final_chi2 - optimize(without, options).summary.final_chi2
-        assert estimated[edge] == pytest.approx(saved, rel=0.1, abs=0.1)
+        refit = optimize(without, options)
+        saved = solution.summary.final_chi2 - refit.summary.final_chi2
+        assert estimated.innovation[edge] == pytest.approx(saved, rel=0.1, abs=0.1)
+        assert exact.innovation[k] == pytest.approx(saved, rel=0.05, abs=0.05)
+        squares = between_squares(refit.values, graph.edges)[edge]
+        assert exact.squares[k] == pytest.approx(squares, rel=0.05, abs=0.05)
+
+
+def test_innovation_is_the_cost_that_adding_the_edge_adds(make_graph, backend):
+    """At the optimum of the graph without some loops, each left-out loop's innovation χ²
+    (estimated with many probes) equals χ²(with e) − χ²(without) from re-solving with e."""
+    graph = make_graph()
+    options = SolverOptions(linear_solver=backend)
+    left_out = np.zeros(graph.num_edges, dtype=bool)
+    left_out[_loops(graph)] = True
+    without = graph.with_edges(~left_out)
+    solution = optimize(without, options)
+    estimated = innovations(
+        without,
+        solution.values,
+        graph.edges.subset(left_out),
+        probes=10000,
+        seed=1,
+        linear_solver=backend,
+    )
+    for k, edge in enumerate(np.flatnonzero(left_out)):
+        keep = ~left_out
+        keep[edge] = True
+        added = graph.with_edges(keep)
+        added.set_values(solution.values)
+        cost = optimize(added, options).summary.final_chi2 - solution.summary.final_chi2
+        assert estimated[k] == pytest.approx(cost, rel=0.1, abs=0.1)
