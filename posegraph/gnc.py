@@ -1,6 +1,6 @@
 """Graduated non-convexity with a truncated-least-squares kernel (Yang, Antonante, Tzoumas &
 Carlone 2020, "Graduated Non-Convexity for Robust Spatial Perception", Alg. 1), then a
-consistency pass.
+consistency pass and a local search.
 
 1. Solve least squares; set μ = c²/(2 s_max − c²), where the surrogate is convex.
 2. Repeat: weigh the edges by the TLS-GNC weights of their current residuals, solve the weighted
@@ -14,9 +14,10 @@ consistency pass.
    changes. This re-admits true loops that an early, outlier-distorted stage had pushed out.
 4. Local search, in rounds (up to ``LOCAL_SEARCH_ROUNDS``) while a round changes the kept set:
    - re-admit: the rejected loops whose innovation χ² against the solution is below c²
-     (``posegraph.leverage.innovations``) are added back together, and the kept set is settled
-     as in step 3 (warm-started). A region that drifted while its true loops were rejected fits
-     them badly (large s) but predicts the misfit (small innovation);
+     (``posegraph.leverage.innovations``) and that the other re-admitted loops explain are
+     added back together, and the kept set is settled as in step 3 (warm-started). A region
+     that drifted while its true loops were rejected fits them badly (large s) but predicts the
+     misfit (small innovation), and they pull the region back for each other;
    - drop: for the kept loops with the largest deleted residuals d² (``posegraph.leverage``:
      what leaving the loop out would save, to first order), re-solve without each one
      (warm-started). A false loop that the solution bent itself to fit has a small residual s
@@ -35,6 +36,7 @@ from .chordal import supports as supports_chordal
 from .factors import between_squares
 from .graph import PoseGraph
 from .leverage import deleted_residuals, innovations
+from .lie import LieGroup
 from .linear import NormalEquations
 from .robust import tls_gnc_weights
 from .solvers import Result, SolverOptions
@@ -63,7 +65,9 @@ class GncOutcome:
     """Solver iterations over all stages."""
 
 
-def _tls_objective(s: np.ndarray, mask: np.ndarray, width_sq: float) -> float:
+def _tls_objective(graph: PoseGraph, values: LieGroup, mask: np.ndarray, width_sq: float) -> float:
+    """Σ min(s, c²) over the edges in ``mask``, plus Σ s over the others, at ``values``."""
+    s = between_squares(values, graph.edges)
     return float(np.where(mask, np.minimum(s, width_sq), s).sum())
 
 
@@ -117,7 +121,7 @@ def gnc_tls(
             graph, mask, width_sq, options, start, restart
         )
         rounds, iterations = rounds + stage_rounds, iterations + stage_iterations
-        objective = _tls_objective(between_squares(result.values, graph.edges), mask, width_sq)
+        objective = _tls_objective(graph, result.values, mask, width_sq)
         if objective < best_objective:
             best, best_objective = (result, weights), objective
     result, weights = best
@@ -126,7 +130,7 @@ def gnc_tls(
         graph, mask, ~mask | (weights > 0.5), result.values, width_sq, options, restart=True
     )
     iterations += settle_iterations
-    objective = _tls_objective(between_squares(result.values, graph.edges), mask, width_sq)
+    objective = _tls_objective(graph, result.values, mask, width_sq)
     for _ in range(LOCAL_SEARCH_ROUNDS):
         changed = False
         for step in (_readmit, _drop):
@@ -134,9 +138,7 @@ def gnc_tls(
             iterations += trial_iterations
             if trial is None:
                 continue
-            trial_objective = _tls_objective(
-                between_squares(trial.values, graph.edges), mask, width_sq
-            )
+            trial_objective = _tls_objective(graph, trial.values, mask, width_sq)
             if trial_objective < objective:
                 kept, result, objective, changed = trial_kept, trial, trial_objective, True
         if not changed:
@@ -227,7 +229,7 @@ def _drop(graph, mask, kept, result, width_sq, options):
     # (≈ 30%) cannot hide such a loop.
     candidates = np.flatnonzero(mask & kept & (scores > 0.5 * width_sq))
     best, iterations = None, 0
-    objective = _tls_objective(between_squares(result.values, graph.edges), mask, width_sq)
+    objective = _tls_objective(graph, result.values, mask, width_sq)
     for edge in candidates[np.argsort(-scores[candidates])][:LOCAL_SEARCH_CANDIDATES]:
         without = kept.copy()
         without[edge] = False
@@ -235,7 +237,7 @@ def _drop(graph, mask, kept, result, width_sq, options):
         work.set_values(result.values)
         trial = solve(work, options)
         iterations += trial.summary.num_iterations
-        trial_objective = _tls_objective(between_squares(trial.values, graph.edges), mask, width_sq)
+        trial_objective = _tls_objective(graph, trial.values, mask, width_sq)
         if trial_objective < objective:
             kept, result, objective, best = without, trial, trial_objective, trial
     return kept, best, iterations

@@ -12,11 +12,13 @@ import posegraph
 from posegraph import gnc
 from posegraph.api import robust_mask
 from posegraph.chordal import chordal_values
+from posegraph.evaluation import evaluate
 from posegraph.gnc import gnc_tls
 from posegraph.graph import PoseGraph
 from posegraph.initialization import choose, initialize
 from posegraph.lie import SE2, SE3
 from posegraph.robust import KERNELS, RobustKernel, default_width, tls_gnc_weights
+from posegraph.trajectory_io import Trajectory, as_se3
 
 from .conftest import random_graph, union
 
@@ -203,6 +205,53 @@ def test_gnc_local_search_finds_a_fitted_false_loop_by_its_deleted_residual(
 
     assert distance_to_clean(with_search.result.values) < 0.1  # the noise alone: ATE 0.53 m
     assert distance_to_clean(without_search.result.values) > 1.0
+
+
+def _rejected_shares(corrupted, false, result):
+    """(false loops rejected, true loops wrongly rejected), as fractions."""
+    rejected = np.zeros(corrupted.num_edges, dtype=bool)
+    rejected[result.summary.rejected_edges] = True
+    true_loops = robust_mask(corrupted, "loops") & ~false
+    return (rejected & false).sum() / false.sum(), (rejected & true_loops).sum() / true_loops.sum()
+
+
+def test_gnc_readmits_the_true_loops_of_a_drifted_region(shared_dataset, monkeypatch):
+    """manhattan resimulated around its optimum, with 30% false loops (seed 1): the graduated
+    stages reject 44 true loops, and the region they closed drifts (their s reach 10⁶). Their
+    innovations stay small and they explain each other, so re-admission brings them back."""
+    graph = posegraph.read_graph(str(shared_dataset("manhattan.g2o"))).graph
+    solution = posegraph.optimize(graph.copy()).values
+    simulated = resimulate(graph, solution, seed=0)
+    corrupted, false = add_false_loops(simulated, 0.3, seed=1)
+
+    def error_against_truth(result):
+        ids = graph.node_ids.astype(float)
+        estimate, truth = Trajectory(ids, as_se3(result.values)), Trajectory(ids, as_se3(solution))
+        return evaluate(estimate, truth).ate.rmse
+
+    with_readmission = posegraph.optimize(corrupted.copy(), robust="gnc")
+    false_rejected, true_rejected = _rejected_shares(corrupted, false, with_readmission)
+    assert false_rejected == 1.0
+    assert true_rejected < 0.01
+    clean = posegraph.optimize(simulated.copy())
+    assert error_against_truth(with_readmission) < 1.01 * error_against_truth(clean)
+
+    monkeypatch.setattr(gnc, "_readmit", lambda graph, mask, kept, *rest: (kept, None, 0))
+    without = posegraph.optimize(corrupted.copy(), robust="gnc")
+    assert _rejected_shares(corrupted, false, without)[1] > 0.02
+
+
+def test_gnc_readmission_leaves_out_a_lone_false_loop_that_would_fit(shared_dataset, monkeypatch):
+    """intel with 30% false loops (seed 0): one rejected false loop has an innovation below c²
+    (intel's stated noise is large). Re-admitted alone, it would lower the TLS objective by
+    bending the solution to fit it, but no other loop explains it, so it stays rejected."""
+    graph = posegraph.read_graph(str(shared_dataset("intel.g2o"))).graph
+    corrupted, false = add_false_loops(graph, 0.3, seed=0)
+    checked = posegraph.optimize(corrupted.copy(), robust="gnc")
+    assert _rejected_shares(corrupted, false, checked)[0] == 1.0
+    monkeypatch.setattr(gnc, "EXPLAINED", -np.inf)  # every candidate counts as explained
+    unchecked = posegraph.optimize(corrupted.copy(), robust="gnc")
+    assert _rejected_shares(corrupted, false, unchecked)[0] < 1.0
 
 
 @pytest.mark.parametrize("kernel", ["cauchy", "dcs", "huber", "geman-mcclure", "tukey"])
