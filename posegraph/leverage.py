@@ -54,13 +54,11 @@ class _Factored:
     rows_j: np.ndarray
     prior_rows: np.ndarray
 
-    def solve(self, pieces: list[np.ndarray]) -> np.ndarray:
-        """w = H⁻¹ Aᵀ z for each probe given by its pieces Aᵀz (stacked as for
-        ``BlockPattern.vector``): (num_nodes, d, K), zero on held nodes."""
-        rhs = np.stack([self.system.vector(piece) for piece in pieces], axis=1)
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        """H⁻¹ rhs for a (size, K) right-hand side, as (num_nodes, d, K), zero on held nodes."""
         d = self.system.dof
-        w = np.zeros((self.system.block_of.size, d, len(pieces)))
-        w[self.system.free_nodes] = self.system.solve(rhs).reshape(-1, d, len(pieces))
+        w = np.zeros((self.system.block_of.size, d, rhs.shape[1]))
+        w[self.system.free_nodes] = self.system.solve(rhs).reshape(-1, d, rhs.shape[1])
         return w
 
     def rademacher(self, probes: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -74,28 +72,42 @@ class _Factored:
         def transposed_times(rows: np.ndarray, probe: np.ndarray) -> np.ndarray:
             return np.einsum("mba,mb->ma", rows, probe)
 
-        pieces = [
-            np.concatenate(
-                [
-                    transposed_times(self.rows_i, z[k]),
-                    transposed_times(self.rows_j, z[k]),
-                    transposed_times(self.prior_rows, z_priors[k]),
-                ]
-            )
-            for k in range(probes)
-        ]
-        return z, self.solve(pieces)
+        rhs = np.stack(
+            [
+                self.system.vector(
+                    np.concatenate(
+                        [
+                            transposed_times(self.rows_i, z[k]),
+                            transposed_times(self.rows_j, z[k]),
+                            transposed_times(self.prior_rows, z_priors[k]),
+                        ]
+                    )
+                )
+                for k in range(probes)
+            ],
+            axis=1,
+        )
+        return z, self.solve(rhs)
 
-    def units(self, edges: np.ndarray) -> np.ndarray:
-        """w = H⁻¹ Aₑᵀ for the given edges: (num_nodes, d, len(edges), d)."""
-        m, d = len(self.whitened), self.system.dof
-        pieces = []
-        for edge in edges:
-            for a in range(d):
-                piece = np.zeros((2 * m + len(self.prior_rows), d))
-                piece[edge], piece[m + edge] = self.rows_i[edge, a], self.rows_j[edge, a]
-                pieces.append(piece)
-        return self.solve(pieces).reshape(-1, d, len(edges), d)
+    def units(self, edges: np.ndarray, ends: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+        """w = H⁻¹ Aₑᵀ for the given edges, whose nodes are ``ends`` (i, j):
+        (num_nodes, d, len(edges), d)."""
+        d, size, count = self.system.dof, self.system.size, edges.size
+        rhs = np.zeros((size + d, count, d))  # rows past ``size`` collect held nodes' parts
+        for nodes, rows in zip(ends, (self.rows_i[edges], self.rows_j[edges]), strict=True):
+            blocks = self.system.block_of[nodes]
+            start = np.where(blocks >= 0, blocks * d, size)
+            # (Aₑᵀ)[b, a] = rows[e, a, b] goes to row start + b of column (e, a).
+            np.add.at(
+                rhs,
+                (
+                    start[:, None, None] + np.arange(d),
+                    np.arange(count)[:, None, None],
+                    np.arange(d)[None, :, None],
+                ),
+                rows,
+            )
+        return self.solve(rhs[:size].reshape(size, count * d)).reshape(-1, d, count, d)
 
 
 def _whitened(
@@ -155,7 +167,7 @@ def deleted_residuals(
         whitened = factored.whitened
     else:
         edges = np.asarray(edges, dtype=np.int64)
-        w = factored.units(edges)
+        w = factored.units(edges, (i[edges], j[edges]))
         chosen = np.arange(edges.size)
         hat = (
             factored.rows_i[edges] @ w[i[edges], :, chosen]
