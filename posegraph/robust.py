@@ -87,16 +87,6 @@ class Robustifier:
         return cost, weights
 
 
-@dataclasses.dataclass(frozen=True)
-class FixedWeights:
-    """Edges weighed by given weights w: cost w·s (used by each GNC stage)."""
-
-    weights: np.ndarray
-
-    def cost_and_weights(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return self.weights * s, self.weights
-
-
 def tls_gnc_weights(s: np.ndarray, width_sq: float, mu: float) -> np.ndarray:
     """Weights of the truncated-least-squares kernel's GNC surrogate (Yang, Antonante, Tzoumas &
     Carlone 2020, "Graduated Non-Convexity for Robust Spatial Perception", eq. 14):

@@ -117,8 +117,8 @@ def optimize(
     an earlier call on this graph, warm-starts: its pattern is grown if the graph grew by
     appending, and its linearisation is reused where the graph's edges and values are
     unchanged (least squares only). ``weighting`` makes the cost
-    robust (``posegraph.robust.Robustifier``) or weighs edges (IRLS with its weights re-evaluated
-    at every linearisation). The graph is not modified.
+    robust (``posegraph.robust.Robustifier``: IRLS, its weights re-evaluated at every
+    linearisation). The graph is not modified.
     """
     options = SolverOptions() if options is None else options
     clock = _Clock()
