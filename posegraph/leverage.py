@@ -19,9 +19,9 @@ Both are estimated for all edges at once from K Rademacher probes z over the whi
 the one K-column solve w = H⁻¹ Aᵀ z. Mₑₑ from E[(A w)ₑ zₑᵀ] = Mₑₑ (Bekas, Kokiopoulou & Saad
 2007, "An estimator for the diagonal of a matrix"), whose variance per entry is (Mₑₑ − Mₑₑ²)/K;
 Pₑ from E[(Aₑ w)(Aₑ w)ᵀ] = Aₑ H⁻¹ (AᵀA) H⁻¹ Aₑᵀ = Pₑ, within ≈ √(2/K) relative. For a few
-chosen edges, Mₑₑ is exact from unit probes (d solves per edge): where Mₑₑ is near I, the
-estimate's error in I − Mₑₑ, squared in the deleted residual's s, can reach an order of
-magnitude.
+chosen edges, Mₑₑ is exact, from the joint covariance of each edge's two nodes
+(``posegraph.marginals``): where Mₑₑ is near I, the estimate's error in I − Mₑₑ, squared in
+the deleted residual's s, can reach an order of magnitude.
 """
 
 from __future__ import annotations
@@ -34,6 +34,7 @@ from .factors import Linearization, information_root, linearize_between, lineari
 from .graph import EdgeSet, PoseGraph
 from .lie import LieGroup
 from .linear import NormalEquations, factorized_information
+from .marginals import joint_covariances
 
 PROBES = 256
 """Probes for ranking. At 32 a leverage of 0.7 is off by ±0.08, and d² by up to two orders of
@@ -89,26 +90,6 @@ class _Factored:
         )
         return z, self.solve(rhs)
 
-    def units(self, edges: np.ndarray, ends: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
-        """w = H⁻¹ Aₑᵀ for the given edges, whose nodes are ``ends`` (i, j):
-        (num_nodes, d, len(edges), d)."""
-        d, size, count = self.system.dof, self.system.size, edges.size
-        rhs = np.zeros((size + d, count, d))  # rows past ``size`` collect held nodes' parts
-        for nodes, rows in zip(ends, (self.rows_i[edges], self.rows_j[edges]), strict=True):
-            blocks = self.system.block_of[nodes]
-            start = np.where(blocks >= 0, blocks * d, size)
-            # (Aₑᵀ)[b, a] = rows[e, a, b] goes to row start + b of column (e, a).
-            np.add.at(
-                rhs,
-                (
-                    start[:, None, None] + np.arange(d),
-                    np.arange(count)[:, None, None],
-                    np.arange(d)[None, :, None],
-                ),
-                rows,
-            )
-        return self.solve(rhs[:size].reshape(size, count * d)).reshape(-1, d, count, d)
-
 
 def _whitened(
     between: Linearization, information: np.ndarray
@@ -122,8 +103,10 @@ def _whitened(
     )
 
 
-def _factorize(graph: PoseGraph, values: LieGroup, linear_solver: str) -> _Factored:
-    system, between = factorized_information(graph, values, linear_solver)
+def _factorize(
+    graph: PoseGraph, values: LieGroup, linear_solver: str, for_covariance: bool = False
+) -> _Factored:
+    system, between = factorized_information(graph, values, linear_solver, for_covariance)
     prior_rows = (
         information_root(graph.priors.information) @ linearize_priors(values, graph.priors).jac_j
     )
@@ -158,7 +141,7 @@ def deleted_residuals(
 ) -> DeletedResiduals:
     """Deleted residuals at ``values`` (see the module docstring): exact for the between edges
     indexed by ``edges``, or estimated for all from ``probes`` Rademacher probes."""
-    factored = _factorize(graph, values, linear_solver)
+    factored = _factorize(graph, values, linear_solver, for_covariance=edges is not None)
     i, j = graph.edges.i, graph.edges.j
     if edges is None:
         z, w = factored.rademacher(probes, seed)
@@ -167,12 +150,11 @@ def deleted_residuals(
         whitened = factored.whitened
     else:
         edges = np.asarray(edges, dtype=np.int64)
-        w = factored.units(edges, (i[edges], j[edges]))
-        chosen = np.arange(edges.size)
-        hat = (
-            factored.rows_i[edges] @ w[i[edges], :, chosen]
-            + factored.rows_j[edges] @ w[j[edges], :, chosen]
-        )  # Aₑ H⁻¹ Aₑᵀ
+        d = graph.group.dof
+        ends = list(np.stack([i[edges], j[edges]], axis=1))
+        covariances = np.array(joint_covariances(factored.system, ends)).reshape(-1, 2 * d, 2 * d)
+        rows = np.concatenate([factored.rows_i[edges], factored.rows_j[edges]], axis=2)
+        hat = rows @ covariances @ np.swapaxes(rows, 1, 2)  # Aₑ H⁻¹ Aₑᵀ
         whitened = factored.whitened[edges]
     eigenvalues, projected = _eigen(whitened, np.eye(graph.group.dof) - hat)
     return DeletedResiduals(

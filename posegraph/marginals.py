@@ -14,7 +14,26 @@ import numpy as np
 
 from .graph import PoseGraph
 from .lie import LieGroup
-from .linear import factorized_information
+from .linear import NormalEquations, factorized_information
+
+
+def joint_covariances(system: NormalEquations, groups: list[np.ndarray]) -> list[np.ndarray]:
+    """The joint covariance, (k·d, k·d), of each group of k node indices, from ``system``
+    factorised for covariance; rows and columns of held nodes are zero."""
+    d = system.dof
+    slots, columns = [], []
+    for group in groups:
+        blocks = system.block_of[group]
+        free = np.flatnonzero(blocks >= 0)
+        slots.append((free[:, None] * d + np.arange(d)).ravel())
+        columns.append((blocks[free, None] * d + np.arange(d)).ravel())
+    covariances = [np.zeros((len(group) * d, len(group) * d)) for group in groups]
+    solved = [k for k, c in enumerate(columns) if c.size]
+    if solved:
+        blocks = system.cholesky.covariance_blocks([columns[k] for k in solved])
+        for k, block in zip(solved, blocks, strict=True):
+            covariances[k][np.ix_(slots[k], slots[k])] = block
+    return covariances
 
 
 def marginals(
@@ -32,21 +51,8 @@ def marginals(
     """
     values = graph.values if values is None else values
     index = graph.index(nodes)
-    d = graph.group.dof
     system, _ = factorized_information(graph, values, linear_solver, for_covariance=True)
-
-    blocks = system.block_of[index]
-    free = np.flatnonzero(blocks >= 0)
-    columns = [blocks[k] * d + np.arange(d) for k in free]
     if joint:
-        covariance = np.zeros((index.size * d, index.size * d))
-        if free.size:
-            slots = (free[:, None] * d + np.arange(d)).ravel()
-            covariance[np.ix_(slots, slots)] = system.cholesky.covariance_blocks(
-                [np.concatenate(columns)]
-            )[0]
-        return covariance
-    covariance = np.zeros((index.size, d, d))
-    if free.size:
-        covariance[free] = np.stack(system.cholesky.covariance_blocks(columns))
-    return covariance
+        return joint_covariances(system, [index])[0]
+    d = graph.group.dof
+    return np.stack(joint_covariances(system, list(index[:, None]))).reshape(-1, d, d)
