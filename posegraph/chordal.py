@@ -78,11 +78,9 @@ def _solve(
     with zeros at held nodes."""
     pattern.factorize(pattern.matrix_data(blocks))
     columns = pieces.shape[2]
+    rhs = np.stack([pattern.vector(pieces[:, :, c]) for c in range(columns)], axis=1)
     solution = np.zeros((num_nodes, pattern.d, columns))
-    free = np.flatnonzero(pattern.block_of >= 0)
-    for c in range(columns):
-        x = pattern.solve(-pattern.vector(np.ascontiguousarray(pieces[:, :, c])))
-        solution[free, :, c] = x.reshape(-1, pattern.d)
+    solution[pattern.block_of >= 0] = pattern.solve(-rhs).reshape(-1, pattern.d, columns)
     return solution
 
 
