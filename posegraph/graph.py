@@ -207,6 +207,10 @@ class PoseGraph:
         self.structure_version += 1
         return np.arange(start, start + len(new))
 
+    def add_prior(self, node_id: int, measurement, information) -> int:
+        """Add one prior (see ``add_priors``); returns its index."""
+        return int(self.add_priors([node_id], measurement, information)[0])
+
     def with_edges(self, keep: np.ndarray) -> PoseGraph:
         """A copy holding only the between edges where ``keep`` (a mask or indices) holds."""
         other = self.copy()
@@ -234,10 +238,6 @@ class PoseGraph:
         inside_pairs = np.isin(self.equivalences, other.node_ids).all(axis=1)
         other.equivalences = self.equivalences[inside_pairs]
         return other
-
-    def add_prior(self, node_id: int, measurement, information) -> int:
-        """Add one prior (see ``add_priors``); returns its index."""
-        return int(self.add_priors([node_id], measurement, information)[0])
 
     def remove_edges(self, edge_indices) -> None:
         """Remove between edges by index (indices of later edges shift down)."""

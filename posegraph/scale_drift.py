@@ -112,8 +112,7 @@ def correct_scale_drift(
         raise ValueError(
             f"scale-drift correction needs an SE3 or Sim3 graph, not {graph.group.__name__}"
         )
-    result = optimize(sim3, init=init, options=options)
-    sim3.set_values(result.values)
+    result = optimize(sim3, init=init, options=options)  # leaves the solution in ``sim3``
     return ScaleDriftCorrection(
         poses=sim3_to_se3(result.values, convention),
         scales=np.asarray(result.values.scale).copy(),
