@@ -40,3 +40,18 @@ def add_false_loops(graph: PoseGraph, fraction: float, seed: int) -> tuple[PoseG
     false_mask = np.zeros(corrupted.num_edges, dtype=bool)
     false_mask[graph.num_edges :] = True
     return corrupted, false_mask
+
+
+def rejection_rates(
+    graph: PoseGraph, false: np.ndarray, rejected: np.ndarray
+) -> tuple[float, float]:
+    """For ``rejected`` edge indices of ``graph`` with the false-loop mask ``false``: the share of
+    the false loops rejected, and the share of the true loop closures (edges between
+    non-consecutive nodes that are not false) wrongly rejected."""
+    is_rejected = np.zeros(graph.num_edges, dtype=bool)
+    is_rejected[rejected] = True
+    true_loops = ~odometry_mask(graph) & ~false
+    return (
+        float((is_rejected & false).sum() / max(false.sum(), 1)),
+        float((is_rejected & true_loops).sum() / max(true_loops.sum(), 1)),
+    )

@@ -18,12 +18,11 @@ from __future__ import annotations
 import argparse
 import time
 
-import numpy as np
 from posegraph_datasets.generators import resimulate
-from posegraph_datasets.outliers import add_false_loops
+from posegraph_datasets.outliers import add_false_loops, rejection_rates
 from posegraph_datasets.paths import gtsam_data_dir, shared_datasets_dir
 
-from ..api import optimize, robust_mask
+from ..api import optimize
 from ..evaluation import evaluate
 from ..graph import PoseGraph
 from ..io import read_graph
@@ -69,15 +68,12 @@ def run(names: list[str], fractions: list[float], seeds: list[int]) -> str:
             for fraction in fractions:
                 for seed in seeds:
                     corrupted, false = add_false_loops(graph, fraction, seed)
-                    loops = robust_mask(corrupted, "loops")
                     start = time.perf_counter()
                     result = optimize(corrupted, robust="gnc")
                     elapsed = time.perf_counter() - start
-                    rejected = np.zeros(corrupted.num_edges, dtype=bool)
-                    rejected[result.summary.rejected_edges] = True
-                    false_rejected = (rejected & false).sum() / max(false.sum(), 1)
-                    true_loops = loops & ~false
-                    true_rejected = (rejected & true_loops).sum() / max(true_loops.sum(), 1)
+                    false_rejected, true_rejected = rejection_rates(
+                        corrupted, false, result.summary.rejected_edges
+                    )
                     ate = evaluate(_trajectory(corrupted, result.values), reference).ate.rmse
                     ratio = f"{ate / ate_clean:.3f}" if truth else "–"
                     against = "ground truth" if truth else "outlier-free"
