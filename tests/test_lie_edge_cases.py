@@ -9,7 +9,8 @@ from posegraph.lie import SE2, SE3, SO2, SO3, LieGroup, Sim3
 
 from .helpers import assert_same_element, numerical_jacobian
 
-ANGLES = [0.0, 1e-8, 1e-4, np.pi - 1e-6, np.pi]
+# Either side of the coefficients' switch to series, at θ = 0.1 and 0.5, too.
+ANGLES = [0.0, 1e-8, 1e-4, 0.099, 0.101, 0.499, 0.501, np.pi - 1e-6, np.pi]
 LOG_SCALES = [0.0, 1e-8, -1e-8, 3.0, -3.0]
 AXIS = np.array([0.48, -0.6, 0.64])  # unit length
 

@@ -18,12 +18,12 @@ _SERIES_BELOW = 0.1
 _Q_SERIES_BELOW = 0.5
 
 
-def _even_series(theta_sq: np.ndarray, coefficients: list[float]) -> np.ndarray:
-    """Evaluate Σ_k c_k θ^{2k} by Horner's rule."""
-    result = np.zeros_like(theta_sq)
-    for c in reversed(coefficients):
-        result = result * theta_sq + c
-    return result
+def _even_series(theta_sq: np.ndarray, coefficients) -> np.ndarray:
+    """Σ_k c_k θ^{2k} for coefficients (k,), or for each column of (k, n) at once (…, n).
+    The powers are formed directly: θ² < 0.25 where a series is used, and the terms fall fast."""
+    coefficients = np.asarray(coefficients, dtype=float)
+    powers = np.asarray(theta_sq, dtype=float)[..., None] ** np.arange(len(coefficients))
+    return powers @ coefficients
 
 
 def _coefficient(
@@ -32,8 +32,10 @@ def _coefficient(
     """Pick the closed form or its series, without dividing by zero in the unused branch."""
     theta = np.asarray(theta, dtype=float)
     small = np.abs(theta) < below
-    if not np.any(small):
+    if not small.any():
         return closed_form(theta)
+    if small.all():
+        return _even_series(theta * theta, series)
     result = np.asarray(closed_form(np.where(small, 1.0, theta)))
     result[small] = _even_series(theta[small] ** 2, series)
     return result
@@ -44,19 +46,23 @@ def _alternating(offset: int, terms: int = 8) -> list[float]:
     return [(-1.0) ** k / factorial(2 * k + offset) for k in range(terms)]
 
 
+_ROTATION_SERIES = np.array([_alternating(1), _alternating(2), _alternating(3)]).T
+"""Series of sin θ/θ, (1 − cos θ)/θ² and (θ − sin θ)/θ³, one per column."""
+
+
 def sin_over(theta: np.ndarray) -> np.ndarray:
     """sin θ / θ."""
-    return _coefficient(theta, lambda t: np.sin(t) / t, _alternating(1))
+    return _coefficient(theta, lambda t: np.sin(t) / t, _ROTATION_SERIES[:, 0])
 
 
 def one_minus_cos_over_sq(theta: np.ndarray) -> np.ndarray:
     """(1 − cos θ) / θ²."""
-    return _coefficient(theta, lambda t: (1.0 - np.cos(t)) / t**2, _alternating(2))
+    return _coefficient(theta, lambda t: (1.0 - np.cos(t)) / t**2, _ROTATION_SERIES[:, 1])
 
 
 def theta_minus_sin_over_cube(theta: np.ndarray) -> np.ndarray:
     """(θ − sin θ) / θ³."""
-    return _coefficient(theta, lambda t: (t - np.sin(t)) / t**3, _alternating(3))
+    return _coefficient(theta, lambda t: (t - np.sin(t)) / t**3, _ROTATION_SERIES[:, 2])
 
 
 def rotation_coefficients(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -72,31 +78,44 @@ def rotation_coefficients(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np
     b = np.asarray((1.0 - cos) * inverse_sq)
     c = np.asarray((1.0 - a) * inverse_sq)
     if small.any():
-        t2 = theta[small] ** 2
-        for out, offset in ((a, 1), (b, 2), (c, 3)):
-            out[small] = _even_series(t2, _alternating(offset))
+        series = _even_series(theta[small] ** 2, _ROTATION_SERIES)
+        for k, out in enumerate((a, b, c)):
+            out[small] = series[:, k]
     return a, b, c
 
 
-def se3_q_second(theta: np.ndarray) -> np.ndarray:
-    """(θ² + 2 cos θ − 2) / (2 θ⁴), the second Q-matrix coefficient (Barfoot eq. 7.86)."""
-    return _coefficient(
-        theta,
-        lambda t: (t * t + 2.0 * np.cos(t) - 2.0) / (2.0 * t**4),
+_Q_SERIES = np.array(
+    [
+        _alternating(3, terms=10),
         _alternating(4, terms=10),
-        _Q_SERIES_BELOW,
-    )
+        [(-1.0) ** k * (k + 1) / factorial(2 * k + 5) for k in range(10)],
+    ]
+).T
+"""The three coefficients' series, one per column."""
 
 
-def se3_q_third(theta: np.ndarray) -> np.ndarray:
-    """(2θ − 3 sin θ + θ cos θ) / (2 θ⁵), the third Q-matrix coefficient (Barfoot eq. 7.86)."""
-    series = [(-1.0) ** j * (j + 1) / factorial(2 * j + 5) for j in range(10)]
-    return _coefficient(
-        theta,
-        lambda t: (2.0 * t - 3.0 * np.sin(t) + t * np.cos(t)) / (2.0 * t**5),
-        series,
-        _Q_SERIES_BELOW,
+def se3_q_coefficients(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The three Q-matrix coefficients of Barfoot eq. 7.86, from one sin and cos evaluation:
+    (θ − sin θ)/θ³, (θ² + 2 cos θ − 2)/(2 θ⁴) and (2θ − 3 sin θ + θ cos θ)/(2 θ⁵); their series
+    below ``_Q_SERIES_BELOW``."""
+    theta = np.asarray(theta, dtype=float)
+    small = np.abs(theta) < _Q_SERIES_BELOW
+    if small.all():  # the usual case near an optimum: no closed form to evaluate
+        series = _even_series(theta * theta, _Q_SERIES)
+        return series[..., 0], series[..., 1], series[..., 2]
+    safe = np.where(small, 1.0, theta)
+    sin, cos = np.sin(safe), np.cos(safe)
+    safe_sq = safe * safe
+    coefficients = (
+        np.asarray((safe - sin) / (safe_sq * safe)),
+        np.asarray((safe_sq + 2.0 * cos - 2.0) / (2.0 * safe_sq * safe_sq)),
+        np.asarray((2.0 * safe - 3.0 * sin + safe * cos) / (2.0 * safe_sq * safe_sq * safe)),
     )
+    if small.any():
+        series = _even_series(theta[small] ** 2, _Q_SERIES)
+        for k, out in enumerate(coefficients):
+            out[small] = series[:, k]
+    return coefficients
 
 
 _JR_INV_SERIES = [1 / 12, 1 / 720, 1 / 30240, 1 / 1209600, 1 / 47900160]
@@ -116,6 +135,8 @@ def so3_jr_inv_coefficient_from_trig(
     small = np.abs(theta) < _SERIES_BELOW
     if not small.any():
         return (1.0 - 0.5 * theta * sin / (1.0 - cos)) / theta**2
+    if small.all():
+        return _even_series(theta * theta, _JR_INV_SERIES)
     safe = np.where(small, 1.0, theta)
     result = np.asarray(
         (1.0 - 0.5 * safe * np.where(small, 0.0, sin) / np.where(small, 1.0, 1.0 - cos)) / safe**2
@@ -132,7 +153,15 @@ def half_cot_half(theta: np.ndarray) -> np.ndarray:
 
 def hat3(v: np.ndarray) -> np.ndarray:
     """The skew-symmetric matrix v× of a (…, 3) array, so that (v×) p = v × p."""
-    return so3_polynomial(v, 0.0, 1.0, 0.0)
+    v = np.asarray(v, dtype=float)
+    out = np.zeros(v.shape + (3,))
+    np.negative(v[..., 2], out=out[..., 0, 1])
+    out[..., 0, 2] = v[..., 1]
+    out[..., 1, 0] = v[..., 2]
+    np.negative(v[..., 0], out=out[..., 1, 2])
+    np.negative(v[..., 1], out=out[..., 2, 0])
+    out[..., 2, 1] = v[..., 0]
+    return out
 
 
 def _components(phi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

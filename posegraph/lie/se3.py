@@ -32,9 +32,7 @@ def _q_right(rho: np.ndarray, phi: np.ndarray) -> np.ndarray:
     p, r = hat3(phi), hat3(rho)
     pr, rp = p @ r, r @ p
     prp = pr @ p
-    c1 = _coeffs.theta_minus_sin_over_cube(theta)[..., None, None]
-    c2 = _coeffs.se3_q_second(theta)[..., None, None]
-    c3 = _coeffs.se3_q_third(theta)[..., None, None]
+    c1, c2, c3 = (c[..., None, None] for c in _coeffs.se3_q_coefficients(theta))
     return (
         -0.5 * r
         + c1 * (pr + rp - prp)

@@ -181,6 +181,9 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
     else:
         lam = options.initial_damping * float(diagonal.max())
     nu = 2.0
+    # |x| of the step test, at the start: it changes little over a run, and a Log of every
+    # node per iteration would cost as much as a linearisation on small graphs.
+    size = float(np.linalg.norm(current.values.log()))
 
     for iteration in range(1, options.max_iterations + 1):
         if np.max(np.abs(gradient)) < options.gradient_tolerance:
@@ -252,7 +255,6 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
         if decrease <= options.relative_decrease * previous_error:
             termination, converged = "relative error decrease below tolerance", True
             break
-        size = float(np.linalg.norm(current.values.log()))
         if step_norm < options.step_tolerance * (size + options.step_tolerance):
             termination, converged = "step below tolerance", True
             break
