@@ -70,18 +70,14 @@ def _anchors(graph: PoseGraph) -> tuple[np.ndarray, LieGroup]:
     return held, values
 
 
-def _solve(
-    pattern: BlockPattern, blocks: np.ndarray, pieces: np.ndarray, num_nodes: int
-) -> np.ndarray:
+def _solve(pattern: BlockPattern, blocks: np.ndarray, pieces: np.ndarray) -> np.ndarray:
     """Minimise Σₑ ‖Jₑ x + r⁰ₑ‖²_W over the free blocks: H x = −g, one right-hand side per
     trailing column of ``pieces`` (2m, d, k), all with one factorisation. Returns (n, d, k)
     with zeros at held nodes."""
     pattern.factorize(pattern.matrix_data(blocks))
     columns = pieces.shape[2]
     rhs = np.stack([pattern.vector(pieces[:, :, c]) for c in range(columns)], axis=1)
-    solution = np.zeros((num_nodes, pattern.d, columns))
-    solution[pattern.block_of >= 0] = pattern.solve(-rhs).reshape(-1, pattern.d, columns)
-    return solution
+    return pattern.scatter(pattern.solve(-rhs))
 
 
 def chordal_values(graph: PoseGraph) -> LieGroup:
@@ -111,7 +107,7 @@ def chordal_values(graph: PoseGraph) -> LieGroup:
     r0 = rows[j] - rows[i] @ z  # (m, a, ·): row a of every edge's residual at the known rows
     blocks = np.concatenate([w * eye, w * eye, -w * z, -w * np.swapaxes(z, 1, 2)])
     pieces = np.concatenate([-w * (z @ np.swapaxes(r0, 1, 2)), w * np.swapaxes(r0, 1, 2)])
-    rows += np.swapaxes(_solve(pattern, blocks, pieces, n), 1, 2)
+    rows += np.swapaxes(_solve(pattern, blocks, pieces), 1, 2)
     rotation = project_to_rotation(rows)
     rotation[held] = held_rotation
 
@@ -123,7 +119,7 @@ def chordal_values(graph: PoseGraph) -> LieGroup:
         r0 = (log_scale[j] - log_scale[i] - np.log(measured_scale))[:, None, None]
         blocks = np.concatenate([w_s, w_s, -w_s, -w_s])
         pieces = np.concatenate([-w_s * r0, w_s * r0])
-        log_scale += _solve(BlockPattern(block_of, i, j, no_priors, 1), blocks, pieces, n)[:, 0, 0]
+        log_scale += _solve(BlockPattern(block_of, i, j, no_priors, 1), blocks, pieces)[:, 0, 0]
     scale = np.exp(log_scale)
 
     # Translations: r = tⱼ − tᵢ − sᵢ Rᵢ Δt with weight W = Rᵢ Ω_tt Rᵢᵀ / sᵢ² (the between
@@ -136,7 +132,7 @@ def chordal_values(graph: PoseGraph) -> LieGroup:
     r0 = translation[j] - translation[i] - offsets
     weighted = np.einsum("mab,mb->ma", world, r0)[:, :, None]
     blocks = np.concatenate([world, world, -world, -world])
-    translation += _solve(pattern, blocks, np.concatenate([-weighted, weighted]), n)[:, :, 0]
+    translation += _solve(pattern, blocks, np.concatenate([-weighted, weighted]))[:, :, 0]
     if group is SE2:
         return SE2(np.arctan2(rotation[:, 1, 0], rotation[:, 0, 0]), translation)
     if group is Sim3:

@@ -57,10 +57,7 @@ class _Factored:
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """H⁻¹ rhs for a (size, K) right-hand side, as (num_nodes, d, K), zero on held nodes."""
-        d = self.system.dof
-        w = np.zeros((self.system.block_of.size, d, rhs.shape[1]))
-        w[self.system.free_nodes] = self.system.solve(rhs).reshape(-1, d, rhs.shape[1])
-        return w
+        return self.system.scatter(self.system.solve(rhs))
 
     def rademacher(self, probes: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
         """Rademacher probes z of the between rows (K, m, d) and w = H⁻¹ Aᵀ z, the priors'

@@ -195,6 +195,14 @@ class BlockPattern:
         """Solve with the last factorisation."""
         return self.cholesky.solve(rhs)
 
+    def scatter(self, solution: np.ndarray) -> np.ndarray:
+        """A (size,) or (size, k) solution over the free blocks as (num_nodes, d) or
+        (num_nodes, d, k), zero on held nodes."""
+        columns = solution.shape[1:]
+        full = np.zeros((self.block_of.size, self.d) + columns)
+        full[self.block_of >= 0] = solution.reshape((-1, self.d) + columns)
+        return full
+
     def matrix(self, data: np.ndarray) -> scipy.sparse.csc_matrix:
         """The matrix as scipy CSC (for inspection and tests)."""
         return scipy.sparse.csc_matrix((data, self.indices, self.indptr), (self.size, self.size))
@@ -223,7 +231,6 @@ class NormalEquations(BlockPattern):
         """``previous``: see ``BlockPattern``; the system of this graph before it grew."""
         self.dof = graph.group.dof
         block_of = free_block_index(graph.num_nodes, held)
-        self.free_nodes = np.flatnonzero(block_of >= 0)
         super().__init__(
             block_of,
             graph.edges.i,
@@ -263,12 +270,6 @@ class NormalEquations(BlockPattern):
     def diagonal(self, data: np.ndarray) -> np.ndarray:
         """diag(H) from its CSC data."""
         return data[self.diagonal_positions]
-
-    def scatter(self, step: np.ndarray, num_nodes: int) -> np.ndarray:
-        """A (num_nodes, d) tangent step with zeros on the held nodes."""
-        full = np.zeros((num_nodes, self.dof))
-        full[self.free_nodes] = step.reshape(-1, self.dof)
-        return full
 
 
 def factorized_information(

@@ -222,7 +222,7 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
             break
         trial = None
         if step_ok:
-            trial_values = current.values.retract(system.scatter(step, graph.num_nodes))
+            trial_values = current.values.retract(system.scatter(step))
             trial = _Linearized(graph, trial_values, weighting)
             clock.lap("linearize")
         step_norm = float(np.linalg.norm(step))
