@@ -19,7 +19,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-from scipy.stats import chi2
+from scipy.special import gammaincinv
 
 KERNELS = ("huber", "cauchy", "geman-mcclure", "tukey", "dcs")
 
@@ -68,8 +68,13 @@ class RobustKernel:
 
 def default_width(dof: int, quantile: float = 0.99) -> float:
     """√χ²_dof(quantile): the residual size an inlier of ``dof`` dimensions exceeds with
-    probability 1 − quantile."""
-    return float(np.sqrt(chi2.ppf(quantile, dof)))
+    probability 1 − quantile.
+
+    χ²_k is Gamma(k/2, scale 2), so its quantile is 2 P⁻¹(k/2, q) with P the regularised lower
+    incomplete gamma function (Abramowitz & Stegun 26.4.19). scipy.special serves it without
+    importing scipy.stats, which would add about 0.4 s to every start of the command line.
+    """
+    return float(np.sqrt(2.0 * gammaincinv(0.5 * dof, quantile)))
 
 
 @dataclasses.dataclass(frozen=True)

@@ -64,6 +64,16 @@ def test_version_and_help():
         assert "examples:" in text and f"posegraph {command}" in text
 
 
+def test_start_up_leaves_plotting_and_statistics_unloaded():
+    """matplotlib and scipy.stats each add about 0.4 s to a start; only plotting needs the first."""
+    probe = "import sys, posegraph_cli.main; print(' '.join(sorted(sys.modules)))"
+    loaded = subprocess.run(
+        [sys.executable, "-c", probe], capture_output=True, text=True, check=True
+    ).stdout.split()
+    assert "posegraph.api" in loaded
+    assert not {"matplotlib", "scipy.stats"} & set(loaded)
+
+
 def test_optimize_the_bundled_example(tmp_path):
     out, figure = tmp_path / "out.g2o", tmp_path / "out.png"
     document = run_json("optimize", EXAMPLE, "-o", out, "--plot", figure)

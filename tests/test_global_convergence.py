@@ -109,6 +109,15 @@ def test_kernel_weight_is_the_derivative_of_its_cost(name):
     assert np.all(np.diff(kernel.cost(s[:200])) >= 0)
 
 
+@pytest.mark.parametrize("dof", [1, 2, 3, 6, 7])
+def test_default_width_is_the_chi2_quantile(dof):
+    from scipy.stats import chi2
+
+    for quantile in (0.5, 0.9, 0.99, 0.999):
+        expected = np.sqrt(chi2.ppf(quantile, dof))
+        assert default_width(dof, quantile) == pytest.approx(expected, rel=1e-12)
+
+
 def test_tls_gnc_weights_follow_yang_et_al():
     s = np.array([0.0, 0.5, 4.0, 100.0])
     mu, c2 = 1.0, 4.0
