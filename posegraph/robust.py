@@ -71,7 +71,7 @@ def default_width(dof: int, quantile: float = 0.99) -> float:
     probability 1 − quantile.
 
     χ²_k is Gamma(k/2, scale 2), so its quantile is 2 P⁻¹(k/2, q) with P the regularised lower
-    incomplete gamma function (Abramowitz & Stegun 26.4.19). scipy.special serves it without
+    incomplete gamma function (Abramowitz & Stegun §26.4). scipy.special serves it without
     importing scipy.stats, which would add about 0.4 s to every start of the command line.
     """
     return float(np.sqrt(2.0 * gammaincinv(0.5 * dof, quantile)))
