@@ -135,12 +135,11 @@ def gnc_tls(
     for _ in range(LOCAL_SEARCH_ROUNDS):
         changed = False
         for step in (_readmit, _drop):
-            trial_kept, trial, trial_iterations = step(graph, mask, kept, result, width_sq, options)
+            trial_kept, trial, trial_objective, trial_iterations = step(
+                graph, mask, kept, result, objective, width_sq, options
+            )
             iterations += trial_iterations
-            if trial is None:
-                continue
-            trial_objective = _tls_objective(graph, trial.values, mask, width_sq)
-            if trial_objective < objective:
+            if trial is not None and trial_objective < objective:
                 kept, result, objective, changed = trial_kept, trial, trial_objective, True
         if not changed:
             break
@@ -169,7 +168,7 @@ def _settle(graph, mask, kept, values, width_sq, options, restart: bool):
     return kept, result, iterations
 
 
-def _readmit(graph, mask, kept, result, width_sq, options):
+def _readmit(graph, mask, kept, result, objective, width_sq, options):
     """Re-admit the rejected loops that the other re-admitted loops make consistent, and settle.
 
     Candidates are the rejected loops whose innovation χ² against the solution is below c²
@@ -182,10 +181,10 @@ def _readmit(graph, mask, kept, result, width_sq, options):
     repeats over the remaining candidates until all are explained, then the kept set with them
     is settled. The loops of a drifted region pull it back for each other; a lone false loop is
     consistent only with the solution bent to fit it, and without it, its misfit is what it
-    was. Returns (kept, result or None, iterations)."""
+    was. Returns (kept, result or None, its TLS objective, iterations)."""
     rejected = np.flatnonzero(mask & ~kept)
     if rejected.size == 0:
-        return kept, None, 0
+        return kept, None, objective, 0
     innovation = innovations(
         graph.with_edges(kept),
         result.values,
@@ -213,15 +212,16 @@ def _readmit(graph, mask, kept, result, width_sq, options):
             kept, settled, settle_iterations = _settle(
                 graph, mask, with_candidates, values, width_sq, options, restart=False
             )
-            return kept, settled, iterations + settle_iterations
+            settled_objective = _tls_objective(graph, settled.values, mask, width_sq)
+            return kept, settled, settled_objective, iterations + settle_iterations
         candidates = candidates[explained]
-    return kept, None, iterations
+    return kept, None, objective, iterations
 
 
-def _drop(graph, mask, kept, result, width_sq, options):
+def _drop(graph, mask, kept, result, objective, width_sq, options):
     """Leave out, one at a time, the kept loops of largest deleted residual d²
     (``posegraph.leverage.deleted_residuals``), keeping each removal that lowers the TLS
-    objective. Returns (kept, result or None, iterations)."""
+    ``objective`` of ``result``. Returns (kept, result or None, its TLS objective, iterations)."""
     scores = np.zeros(graph.num_edges)
     scores[kept] = deleted_residuals(
         graph.with_edges(kept), result.values, linear_solver=options.linear_solver
@@ -230,7 +230,6 @@ def _drop(graph, mask, kept, result, width_sq, options):
     # (≈ 30%) cannot hide such a loop.
     candidates = np.flatnonzero(mask & kept & (scores > 0.5 * width_sq))
     best, iterations = None, 0
-    objective = _tls_objective(graph, result.values, mask, width_sq)
     for edge in candidates[np.argsort(-scores[candidates])][:LOCAL_SEARCH_CANDIDATES]:
         without = kept.copy()
         without[edge] = False
@@ -241,4 +240,4 @@ def _drop(graph, mask, kept, result, width_sq, options):
         trial_objective = _tls_objective(graph, trial.values, mask, width_sq)
         if trial_objective < objective:
             kept, result, objective, best = without, trial, trial_objective, trial
-    return kept, best, iterations
+    return kept, best, objective, iterations
