@@ -1,0 +1,71 @@
+"""posegraph against gtsam Levenberg-Marquardt on generated graphs of growing size, side by side.
+
+Usage: ``python -m posegraph.benchmarks.scaling [--repeats 10]``.
+The graphs are spheres (SE3, ``posegraph_datasets.generators.sphere``) and Manhattan worlds
+(SE2, ``manhattan_world``) from 9 to 3000 poses, each starting from its composed noisy
+odometry. This shows from what size posegraph's fixed cost per ``optimize`` call (a few
+milliseconds of numpy calls, whatever the size) stops dominating. Prints a markdown table: gtsam
+from the graph's values, then posegraph from the same values, then posegraph with its defaults
+(``init="auto"``, initialisation included); times in milliseconds (best of ``repeats``) and as
+ratios posegraph/gtsam, and the relative difference of the final errors ½ Σ rᵀΩr.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Iterator
+
+from posegraph_datasets.generators import manhattan_world, sphere
+
+from ..graph import PoseGraph
+from .optimizer import time_gtsam, time_posegraph
+
+SPHERES = ((3, 3), (4, 8), (8, 12), (10, 16), (16, 25), (25, 40))
+"""(rings, poses per ring) of the SE3 spheres."""
+MANHATTAN_POSES = (25, 100, 300, 1000, 3000)
+"""Poses of the SE2 Manhattan worlds, on a grid of about √poses / 2 cells a side."""
+
+
+def graphs(seed: int = 1) -> Iterator[PoseGraph]:
+    """The generated graphs, smallest first within each group."""
+    for rings, per_ring in SPHERES:
+        yield sphere(rings, per_ring, seed=seed)[0]
+    for poses in MANHATTAN_POSES:
+        yield manhattan_world(poses, grid_size=max(3, round(poses**0.5 / 2)), seed=seed)[0]
+
+
+def run(repeats: int, echo: bool = False) -> str:
+    """Benchmark every generated graph; returns the markdown table, printing it row by row if
+    ``echo``."""
+    lines = [
+        "| group | poses | edges | gtsam (ms) | iters | posegraph, from the same values (ms) "
+        "| iters | ratio | posegraph, defaults (ms) | init | ratio | rel. error diff |",
+        "|" + "---|" * 12,
+    ]
+    if echo:
+        print("\n".join(lines), flush=True)
+    for graph in graphs():
+        gtsam_time, gtsam_iterations, gtsam_error = time_gtsam(graph, repeats)
+        same_time, same = time_posegraph(graph, repeats, "file")
+        default_time, defaults = time_posegraph(graph, repeats, "auto")
+        difference = (defaults.final_error - gtsam_error) / max(gtsam_error, 1e-300)
+        lines.append(
+            f"| {graph.group.__name__} | {graph.num_nodes} | {graph.num_edges} "
+            f"| {1e3 * gtsam_time:.2f} | {gtsam_iterations} "
+            f"| {1e3 * same_time:.2f} | {same.num_iterations} | {same_time / gtsam_time:.2f} "
+            f"| {1e3 * default_time:.2f} | {defaults.initialization} "
+            f"| {default_time / gtsam_time:.2f} | {difference:+.1e} |"
+        )
+        if echo:
+            print(lines[-1], flush=True)
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=10)
+    run(parser.parse_args().repeats, echo=True)
+
+
+if __name__ == "__main__":
+    main()
