@@ -11,6 +11,7 @@ import argparse
 import numpy as np
 
 from ..lie import SE3, Sim3
+from .table import MarkdownTable
 from .timing import best_time
 
 
@@ -69,21 +70,17 @@ def _peers(count: int, rng: np.random.Generator):
 def run(count: int) -> str:
     """Time every operation and return the markdown table."""
     rng = np.random.default_rng(0)
-    lines = [
-        f"Batched throughput on {count} elements (best of 3; scipy: the rotation part only).",
-        "",
-        "| operation | posegraph (ms) | gtsam loop (ms) | speed-up | scipy Rotation (ms) |",
-        "|---|---:|---:|---:|---:|",
-    ]
+    table = MarkdownTable(
+        "operation | posegraph (ms) | gtsam loop (ms) | speed-up | scipy Rotation (ms)"
+    )
     for name, ours, gtsam_loop, scipy_call in _peers(count, rng):
         t_ours = best_time(ours)
         t_gtsam = best_time(gtsam_loop, repeats=1)
         t_scipy = f"{1e3 * best_time(scipy_call):.1f}" if scipy_call else "–"
         ratio = t_gtsam / t_ours
-        lines.append(
-            f"| {name} | {1e3 * t_ours:.1f} | {1e3 * t_gtsam:.1f} | {ratio:.1f}× | {t_scipy} |"
-        )
-    return "\n".join(lines)
+        table.add(f"{name} | {1e3 * t_ours:.1f} | {1e3 * t_gtsam:.1f} | {ratio:.1f}× | {t_scipy}")
+    caption = f"Batched throughput on {count} elements (best of 3; scipy: the rotation part only)."
+    return f"{caption}\n\n{table}"
 
 
 def main() -> None:

@@ -20,6 +20,7 @@ from ..api import optimize
 from ..graph import PoseGraph
 from ..io import read_graph
 from ..solvers import Summary
+from .table import MarkdownTable
 
 
 def benchmark_files() -> list[Path]:
@@ -71,15 +72,13 @@ def time_posegraph(graph: PoseGraph, repeats: int, init: str) -> tuple[float, Su
 
 def run(files: list[Path], repeats: int, echo: bool = False) -> str:
     """Benchmark every file; returns the markdown table, printing it row by row if ``echo``."""
-    header = (
-        "| graph | read (ms) | gtsam (ms) | gtsam iters | gtsam error | posegraph (ms) | iters "
+    table = MarkdownTable(
+        "graph | read (ms) | gtsam (ms) | gtsam iters | gtsam error | posegraph (ms) | iters "
         "| posegraph error | rel. diff | time ratio "
         "| linearize / assemble / factorize / solve (ms) "
-        "| defaults: init + optimise (ms) | init | error | time ratio |"
+        "| defaults: init + optimise (ms) | init | error | time ratio",
+        echo,
     )
-    lines = [header, "|" + "---|" * 15]
-    if echo:
-        print("\n".join(lines), flush=True)
     for path in files:
         start = time.perf_counter()
         graph = read_graph(str(path)).graph
@@ -92,15 +91,13 @@ def run(files: list[Path], repeats: int, echo: bool = False) -> str:
             f"{1e3 * phases[k]:.2f}" for k in ("linearize", "assemble", "factorize", "solve")
         )
         difference = (summary.final_error - g_error) / g_error
-        lines.append(
-            f"| {path.name} | {1e3 * read_time:.2f} | {1e3 * g_time:.2f} | {g_iters} "
+        table.add(
+            f"{path.name} | {1e3 * read_time:.2f} | {1e3 * g_time:.2f} | {g_iters} "
             f"| {g_error:.10g} | {1e3 * p_time:.2f} | {summary.num_iterations} | {summary.final_error:.10g} "
             f"| {difference:+.1e} | {p_time / g_time:.2f} | {split} "
-            f"| {1e3 * d_time:.2f} | {defaults.initialization} | {defaults.final_error:.10g} | {d_time / g_time:.2f} |"
+            f"| {1e3 * d_time:.2f} | {defaults.initialization} | {defaults.final_error:.10g} | {d_time / g_time:.2f}"
         )
-        if echo:
-            print(lines[-1], flush=True)
-    return "\n".join(lines)
+    return str(table)
 
 
 def main() -> None:

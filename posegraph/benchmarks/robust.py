@@ -28,6 +28,7 @@ from ..graph import PoseGraph
 from ..io import read_graph
 from ..lie import LieGroup
 from ..trajectory_io import Trajectory, as_se3
+from .table import MarkdownTable
 
 
 def _trajectory(graph: PoseGraph, values: LieGroup) -> Trajectory:
@@ -54,12 +55,11 @@ def cases(name: str) -> list[tuple[str, PoseGraph, Trajectory | None]]:
 
 
 def run(names: list[str], fractions: list[float], seeds: list[int]) -> str:
-    lines = [
-        "| graph | measurements | false loops | seed | false rejected | true wrongly rejected "
-        "| ATE robust | ATE outlier-free | ATE vs | ratio | time (s) |",
-        "|" + "---|" * 11,
-    ]
-    print("\n".join(lines), flush=True)
+    table = MarkdownTable(
+        "graph | measurements | false loops | seed | false rejected | true wrongly rejected "
+        "| ATE robust | ATE outlier-free | ATE vs | ratio | time (s)",
+        echo=True,
+    )
     for name in names:
         for label, graph, truth in cases(name):
             clean = _trajectory(graph, optimize(graph.copy()).values)
@@ -77,13 +77,12 @@ def run(names: list[str], fractions: list[float], seeds: list[int]) -> str:
                     ate = evaluate(_trajectory(corrupted, result.values), reference).ate.rmse
                     ratio = f"{ate / ate_clean:.3f}" if truth else "–"
                     against = "ground truth" if truth else "outlier-free"
-                    lines.append(
-                        f"| {name} | {label} | {fraction:.0%} | {seed} | {false_rejected:.1%} "
+                    table.add(
+                        f"{name} | {label} | {fraction:.0%} | {seed} | {false_rejected:.1%} "
                         f"| {true_rejected:.2%} | {ate:.4g} | {ate_clean:.4g} | {against} "
-                        f"| {ratio} | {elapsed:.1f} |"
+                        f"| {ratio} | {elapsed:.1f}"
                     )
-                    print(lines[-1], flush=True)
-    return "\n".join(lines)
+    return str(table)
 
 
 def main() -> None:

@@ -14,13 +14,14 @@ from posegraph_datasets.monocular import monocular_sequence
 
 from ..api import optimize
 from ..scale_drift import correct_scale_drift
+from .table import MarkdownTable
 
 
 def run(drifts: list[float], seeds: list[int], plot: str | None = None) -> str:
-    lines = [
-        "| drift / keyframe | seed | ATE uncorrected | ATE SE3 PGO | ATE Sim3 | uncorrected / Sim3 | SE3 / Sim3 | time (s) |",
-        "|" + "---|" * 8,
-    ]
+    table = MarkdownTable(
+        "drift / keyframe | seed | ATE uncorrected | ATE SE3 PGO | ATE Sim3 | uncorrected / Sim3 "
+        "| SE3 / Sim3 | time (s)"
+    )
     for drift in drifts:
         for seed in seeds:
             sequence = monocular_sequence(drift=drift, seed=seed)
@@ -28,9 +29,9 @@ def run(drifts: list[float], seeds: list[int], plot: str | None = None) -> str:
             se3 = optimize(sequence.se3_graph())
             before = sequence.ate(sequence.odometry.values)
             after, se3_ate = sequence.ate(corrected.poses), sequence.ate(se3.values)
-            lines.append(
-                f"| {drift:.1%} | {seed} | {before:.4g} | {se3_ate:.4g} | {after:.4g} | {before / after:.0f}× "
-                f"| {se3_ate / after:.1f}× | {corrected.result.summary.total_time:.3f} |"
+            table.add(
+                f"{drift:.1%} | {seed} | {before:.4g} | {se3_ate:.4g} | {after:.4g} | {before / after:.0f}× "
+                f"| {se3_ate / after:.1f}× | {corrected.result.summary.total_time:.3f}"
             )
             if plot and (drift, seed) == (drifts[0], seeds[0]):
                 from ..plotting import plot_trajectories
@@ -44,7 +45,7 @@ def run(drifts: list[float], seeds: list[int], plot: str | None = None) -> str:
                 plot_trajectories(
                     curves, plot, title=f"drift {drift:.1%}/keyframe, seed {seed}", view="top"
                 )
-    return "\n".join(lines)
+    return str(table)
 
 
 def main() -> None:

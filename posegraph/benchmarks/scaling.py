@@ -19,6 +19,7 @@ from posegraph_datasets.generators import manhattan_world, sphere
 
 from ..graph import PoseGraph
 from .optimizer import time_gtsam, time_posegraph
+from .table import MarkdownTable
 
 SPHERES = ((3, 3), (4, 8), (8, 12), (10, 16), (16, 25), (25, 40))
 """(rings, poses per ring) of the SE3 spheres."""
@@ -37,28 +38,24 @@ def graphs(seed: int = 1) -> Iterator[PoseGraph]:
 def run(repeats: int, echo: bool = False) -> str:
     """Benchmark every generated graph; returns the markdown table, printing it row by row if
     ``echo``."""
-    lines = [
-        "| group | poses | edges | gtsam (ms) | iters | posegraph, from the same values (ms) "
-        "| iters | ratio | posegraph, defaults (ms) | init | ratio | rel. error diff |",
-        "|" + "---|" * 12,
-    ]
-    if echo:
-        print("\n".join(lines), flush=True)
+    table = MarkdownTable(
+        "group | poses | edges | gtsam (ms) | iters | posegraph, from the same values (ms) "
+        "| iters | ratio | posegraph, defaults (ms) | init | ratio | rel. error diff",
+        echo,
+    )
     for graph in graphs():
         gtsam_time, gtsam_iterations, gtsam_error = time_gtsam(graph, repeats)
         same_time, same = time_posegraph(graph, repeats, "file")
         default_time, defaults = time_posegraph(graph, repeats, "auto")
         difference = (defaults.final_error - gtsam_error) / max(gtsam_error, 1e-300)
-        lines.append(
-            f"| {graph.group.__name__} | {graph.num_nodes} | {graph.num_edges} "
+        table.add(
+            f"{graph.group.__name__} | {graph.num_nodes} | {graph.num_edges} "
             f"| {1e3 * gtsam_time:.2f} | {gtsam_iterations} "
             f"| {1e3 * same_time:.2f} | {same.num_iterations} | {same_time / gtsam_time:.2f} "
             f"| {1e3 * default_time:.2f} | {defaults.initialization} "
-            f"| {default_time / gtsam_time:.2f} | {difference:+.1e} |"
+            f"| {default_time / gtsam_time:.2f} | {difference:+.1e}"
         )
-        if echo:
-            print(lines[-1], flush=True)
-    return "\n".join(lines)
+    return str(table)
 
 
 def main() -> None:
