@@ -48,10 +48,10 @@ def optimize(
     ``init``: see ``posegraph.initialization.initialize``. "auto" warm-starts a graph that was
     optimised before: its nodes keep their values, and nodes added since without values are
     composed from them along a spanning tree and refined alone, the solved nodes held. On a
-    fresh graph it picks chordal relaxation for
-    graphs with loops, or odometry when ``robust`` is set (the odometry chain is trusted).
-    While the structure is unchanged, the sparsity pattern and symbolic factorisation of the
-    last call are reused; ``summary.reused`` says what was.
+    fresh graph it picks chordal relaxation for graphs with loops, or odometry when ``robust``
+    is set (the odometry chain is trusted). While the structure is unchanged, the sparsity
+    pattern and symbolic factorisation of the last call are reused; ``summary.reused`` says
+    what was.
     ``robust``: None for least squares; "gnc" for graduated non-convexity with a truncated
     least-squares kernel (``posegraph.gnc``); or a kernel "huber", "cauchy", "geman-mcclure",
     "tukey", "dcs"; each optionally ":WIDTH" in Mahalanobis units (default ``GNC_QUANTILE`` or
