@@ -55,4 +55,4 @@ def marginals(
     if joint:
         return joint_covariances(system, [index])[0]
     d = graph.group.dof
-    return np.stack(joint_covariances(system, list(index[:, None]))).reshape(-1, d, d)
+    return np.array(joint_covariances(system, list(index[:, None]))).reshape(-1, d, d)

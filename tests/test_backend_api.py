@@ -170,6 +170,8 @@ def test_marginals_are_blocks_of_the_inverse_information():
     ]
     np.testing.assert_allclose(joint, inverse[np.ix_(rows, rows)], rtol=1e-9, atol=1e-12)
     assert np.all(posegraph.marginals(graph, graph.node_ids[held]) == 0)  # the gauge is exact
+    assert posegraph.marginals(graph, []).shape == (0, 6, 6)
+    assert posegraph.marginals(graph, [], joint=True).shape == (0, 0)
     for backend in ("scipy",):
         np.testing.assert_allclose(
             posegraph.marginals(graph, nodes, linear_solver=backend), cov, rtol=1e-8
