@@ -26,19 +26,32 @@ def _even_series(theta_sq: np.ndarray, coefficients) -> np.ndarray:
     return powers @ coefficients
 
 
-def _coefficient(
-    theta: np.ndarray, closed_form, series: list[float], below: float = _SERIES_BELOW
-) -> np.ndarray:
-    """Pick the closed form or its series, without dividing by zero in the unused branch."""
+def _coefficients(
+    theta: np.ndarray, closed_forms, series: np.ndarray, below: float = _SERIES_BELOW
+) -> tuple[np.ndarray, ...]:
+    """n coefficients of θ: ``closed_forms(θ)`` returns them as a tuple (sharing one sin and
+    cos), and column k of ``series`` (terms, n) is the even series of the k-th, used where
+    |θ| < ``below``. The closed forms never see those θ, so they may divide by θ."""
     theta = np.asarray(theta, dtype=float)
     small = np.abs(theta) < below
     if not small.any():
-        return closed_form(theta)
+        return closed_forms(theta)
     if small.all():
-        return _even_series(theta * theta, series)
-    result = np.asarray(closed_form(np.where(small, 1.0, theta)))
-    result[small] = _even_series(theta[small] ** 2, series)
-    return result
+        values = _even_series(theta * theta, series)
+        return tuple(values[..., k] for k in range(values.shape[-1]))
+    coefficients = tuple(np.asarray(c) for c in closed_forms(np.where(small, 1.0, theta)))
+    values = _even_series(theta[small] ** 2, series)
+    for k, out in enumerate(coefficients):
+        out[small] = values[:, k]
+    return coefficients
+
+
+def _coefficient(
+    theta: np.ndarray, closed_form, series, below: float = _SERIES_BELOW
+) -> np.ndarray:
+    """One coefficient: ``_coefficients`` with a single closed form and series (terms,)."""
+    column = np.asarray(series, dtype=float)[:, None]
+    return _coefficients(theta, lambda t: (closed_form(t),), column, below)[0]
 
 
 def _alternating(offset: int, terms: int = 8) -> list[float]:
@@ -68,20 +81,14 @@ def theta_minus_sin_over_cube(theta: np.ndarray) -> np.ndarray:
 def rotation_coefficients(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(sin θ/θ, (1 − cos θ)/θ², (θ − sin θ)/θ³) from one sin and cos evaluation, with the
     series of ``sin_over`` and its siblings below ``_SERIES_BELOW``."""
-    theta = np.asarray(theta, dtype=float)
-    small = np.abs(theta) < _SERIES_BELOW
-    safe = np.where(small, 1.0, theta) if small.any() else theta
-    sin, cos = np.sin(safe), np.cos(safe)
-    inverse = 1.0 / safe
-    inverse_sq = inverse * inverse
-    a = np.asarray(sin * inverse)
-    b = np.asarray((1.0 - cos) * inverse_sq)
-    c = np.asarray((1.0 - a) * inverse_sq)
-    if small.any():
-        series = _even_series(theta[small] ** 2, _ROTATION_SERIES)
-        for k, out in enumerate((a, b, c)):
-            out[small] = series[:, k]
-    return a, b, c
+
+    def closed_forms(t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        inverse = 1.0 / t
+        inverse_sq = inverse * inverse
+        a = np.sin(t) * inverse
+        return a, (1.0 - np.cos(t)) * inverse_sq, (1.0 - a) * inverse_sq
+
+    return _coefficients(theta, closed_forms, _ROTATION_SERIES)
 
 
 _Q_SERIES = np.array(
@@ -98,24 +105,16 @@ def se3_q_coefficients(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nd
     """The three Q-matrix coefficients of Barfoot eq. 7.86, from one sin and cos evaluation:
     (θ − sin θ)/θ³, (θ² + 2 cos θ − 2)/(2 θ⁴) and (2θ − 3 sin θ + θ cos θ)/(2 θ⁵); their series
     below ``_Q_SERIES_BELOW``."""
-    theta = np.asarray(theta, dtype=float)
-    small = np.abs(theta) < _Q_SERIES_BELOW
-    if small.all():  # the usual case near an optimum: no closed form to evaluate
-        series = _even_series(theta * theta, _Q_SERIES)
-        return series[..., 0], series[..., 1], series[..., 2]
-    safe = np.where(small, 1.0, theta)
-    sin, cos = np.sin(safe), np.cos(safe)
-    safe_sq = safe * safe
-    coefficients = (
-        np.asarray((safe - sin) / (safe_sq * safe)),
-        np.asarray((safe_sq + 2.0 * cos - 2.0) / (2.0 * safe_sq * safe_sq)),
-        np.asarray((2.0 * safe - 3.0 * sin + safe * cos) / (2.0 * safe_sq * safe_sq * safe)),
-    )
-    if small.any():
-        series = _even_series(theta[small] ** 2, _Q_SERIES)
-        for k, out in enumerate(coefficients):
-            out[small] = series[:, k]
-    return coefficients
+
+    def closed_forms(t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        sin, cos, t_sq = np.sin(t), np.cos(t), t * t
+        return (
+            (t - sin) / (t_sq * t),
+            (t_sq + 2.0 * cos - 2.0) / (2.0 * t_sq * t_sq),
+            (2.0 * t - 3.0 * sin + t * cos) / (2.0 * t_sq * t_sq * t),
+        )
+
+    return _coefficients(theta, closed_forms, _Q_SERIES, _Q_SERIES_BELOW)
 
 
 _JR_INV_SERIES = [1 / 12, 1 / 720, 1 / 30240, 1 / 1209600, 1 / 47900160]
