@@ -37,10 +37,26 @@ class Linearization:
         )
 
 
+def relative_poses(values: LieGroup, edges: EdgeSet) -> LieGroup:
+    """Xᵢ⁻¹ Xⱼ of every between edge."""
+    return values[edges.i].between(values[edges.j])
+
+
+def residuals_of(relative: LieGroup, edges: EdgeSet) -> np.ndarray:
+    """r = Log(Z⁻¹ Xᵢ⁻¹ Xⱼ) of every between edge, from its relative pose Xᵢ⁻¹ Xⱼ."""
+    return edges.measurements.between(relative).log()
+
+
 def between_residuals(values: LieGroup, edges: EdgeSet) -> np.ndarray:
     """r = Log(Z⁻¹ Xᵢ⁻¹ Xⱼ) for every between edge."""
-    relative = values[edges.i].between(values[edges.j])
-    return edges.measurements.between(relative).log()
+    return residuals_of(relative_poses(values, edges), edges)
+
+
+def between_jacobians(relative: LieGroup, residuals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """∂r/∂δᵢ = −jr⁻¹(r) Ad(Xⱼ⁻¹ Xᵢ) and ∂r/∂δⱼ = jr⁻¹(r) of every between edge, from its
+    relative pose Xᵢ⁻¹ Xⱼ and residual."""
+    jac_j = relative.jr_inv(residuals)
+    return -jac_j @ relative.inverse().adjoint(), jac_j
 
 
 def prior_residuals(values: LieGroup, priors: EdgeSet) -> np.ndarray:
@@ -50,11 +66,9 @@ def prior_residuals(values: LieGroup, priors: EdgeSet) -> np.ndarray:
 
 def linearize_between(values: LieGroup, edges: EdgeSet) -> Linearization:
     """Residuals and both Jacobians of every between edge."""
-    relative = values[edges.i].between(values[edges.j])
-    residuals = edges.measurements.between(relative).log()
-    jac_j = values.jr_inv(residuals)
-    jac_i = -jac_j @ relative.inverse().adjoint()
-    return Linearization(residuals, jac_i, jac_j)
+    relative = relative_poses(values, edges)
+    residuals = residuals_of(relative, edges)
+    return Linearization(residuals, *between_jacobians(relative, residuals))
 
 
 def linearize_priors(values: LieGroup, priors: EdgeSet) -> Linearization:

@@ -6,18 +6,27 @@ finite and lower. Levenberg-Marquardt updates λ by the gain ratio
 ρ = (actual decrease) / (predicted decrease ½ δᵀ(λDδ − g)): on success
 λ ← λ·max(1/3, 1 − (2ρ − 1)³) and ν ← 2; on failure λ ← λ·ν and ν ← 2ν
 (Nielsen 1999; Madsen, Nielsen & Tingleff 2004, §3.2).
-A rejected step costs a refactorisation only; the linearisation is kept.
+A rejected step costs a refactorisation and an evaluation of the residuals: the Jacobians
+are computed only at accepted values, and the linearisation is kept.
 """
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable
 from typing import Protocol
 
 import numpy as np
 
-from ..factors import Linearization, linearize_between, linearize_priors, weighted_squares
+from ..factors import (
+    Linearization,
+    between_jacobians,
+    linearize_priors,
+    relative_poses,
+    residuals_of,
+    weighted_squares,
+)
 from ..graph import PoseGraph
 from ..lie import LieGroup
 from ..linear import NormalEquations
@@ -55,8 +64,9 @@ class EdgeWeighting(Protocol):
 
 
 class _Linearized:
-    """Residuals, Jacobians and error ½ (Σ ρ(s) + Σ s_prior) of the whole graph at some values,
-    and the between edges' information weighted for IRLS.
+    """Residuals and error ½ (Σ ρ(s) + Σ s_prior) of the whole graph at some values, the between
+    edges' information weighted for IRLS, and their Jacobians (``between``, computed on first
+    use: a rejected step never needs them).
 
     ``previous``, a linearisation of this graph before edges were appended, is reused for its
     edges if their nodes still have the values it was taken at (a warm start).
@@ -74,12 +84,12 @@ class _Linearized:
         self.reused_edges = len(previous.edges) if reused else 0
         # Without reuse, every edge is "appended" (and the edge set is not copied).
         appended = graph.edges.subset(slice(self.reused_edges, None)) if reused else graph.edges
-        between = linearize_between(values, appended)
-        squared = weighted_squares(between.residuals, appended.information)
+        self._relative = relative_poses(values, appended)
+        self._residuals = residuals_of(self._relative, appended)
+        self._reused = previous.between if reused else None
+        squared = weighted_squares(self._residuals, appended.information)
         if reused:
-            between = previous.between.extended(between)
             squared = np.concatenate([previous.squared, squared])
-        self.between: Linearization = between
         self.squared = squared
         self.priors: Linearization = linearize_priors(values, graph.priors)
         prior_total = weighted_squares(self.priors.residuals, graph.priors.information).sum()
@@ -90,6 +100,13 @@ class _Linearized:
             cost, weights = weighting.cost_and_weights(self.squared)
             self.information = graph.edges.information * weights[:, None, None]
             self.error = 0.5 * float(cost.sum() + prior_total)
+
+    @functools.cached_property
+    def between(self) -> Linearization:
+        """Residuals and Jacobians of every between edge."""
+        jacobians = between_jacobians(self._relative, self._residuals)
+        appended = Linearization(self._residuals, *jacobians)
+        return appended if self._reused is None else self._reused.extended(appended)
 
     def _holds_for(self, edges, values: LieGroup) -> bool:
         """Whether this linearisation is that of the first edges of ``edges`` at ``values``."""
@@ -166,16 +183,24 @@ def optimize(
     return Result(current.values, summary, system, current)
 
 
+def _assemble(graph, system, current, clock):
+    """H's CSC data, the gradient and diag(H) at ``current`` (its Jacobians timed as
+    linearisation)."""
+    between = current.between
+    clock.lap("linearize")
+    data, gradient = system.assemble(
+        between, current.information, current.priors, graph.priors.information
+    )
+    clock.lap("assemble")
+    return data, gradient, system.diagonal(data)
+
+
 def _iterate(graph, options, callback, system, weighting, clock, current, history):
     """The iterations of ``optimize``; returns (final linearisation, termination, converged).
     ``history`` receives a record per iteration."""
     termination, converged = "maximum iterations reached", False
-    data, gradient = system.assemble(
-        current.between, current.information, current.priors, graph.priors.information
-    )
-    clock.lap("assemble")
+    data, gradient, diagonal = _assemble(graph, system, current, clock)
     lm = options.method == "lm"
-    diagonal = system.diagonal(data)
     if options.damping == "diagonal":
         lam = options.initial_damping
     else:
@@ -258,11 +283,7 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
         if step_norm < options.step_tolerance * (size + options.step_tolerance):
             termination, converged = "step below tolerance", True
             break
-        data, gradient = system.assemble(
-            current.between, current.information, current.priors, graph.priors.information
-        )
-        diagonal = system.diagonal(data)
-        clock.lap("assemble")
+        data, gradient, diagonal = _assemble(graph, system, current, clock)
         if damping_share < 1e-3:
             # The Newton decrement ½ gᵀH⁻¹g at the new values, with H from the factorisation
             # just used (its change over a converging step is second order): when it promises
