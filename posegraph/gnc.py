@@ -35,7 +35,7 @@ from .chordal import chordal_values
 from .chordal import supports as supports_chordal
 from .factors import between_squares
 from .graph import PoseGraph
-from .leverage import deleted_residuals, innovations
+from .leverage import Leverage, deleted_residuals
 from .lie import LieGroup
 from .linear import NormalEquations
 from .robust import tls_gnc_weights
@@ -132,18 +132,26 @@ def gnc_tls(
     )
     iterations += settle_iterations
     objective = _tls_objective(graph, result.values, mask, width_sq)
+    leverage = _leverage(graph, kept, result, options)
     for _ in range(LOCAL_SEARCH_ROUNDS):
         changed = False
         for step in (_readmit, _drop):
             trial_kept, trial, trial_objective, trial_iterations = step(
-                graph, mask, kept, result, objective, width_sq, options
+                graph, mask, kept, result, objective, width_sq, options, leverage
             )
             iterations += trial_iterations
             if trial is not None and trial_objective < objective:
                 kept, result, objective, changed = trial_kept, trial, trial_objective, True
+                leverage = _leverage(graph, kept, result, options)
         if not changed:
             break
     return GncOutcome(result, np.flatnonzero(~kept), rounds, iterations)
+
+
+def _leverage(graph, kept, result, options) -> Leverage:
+    """The probe estimates at the solution ``result`` over the kept edges (computed on first
+    use, then shared by re-admission and dropping while the solution stands)."""
+    return Leverage(graph.with_edges(kept), result.values, linear_solver=options.linear_solver)
 
 
 def _settle(graph, mask, kept, values, width_sq, options, restart: bool):
@@ -168,11 +176,11 @@ def _settle(graph, mask, kept, values, width_sq, options, restart: bool):
     return kept, result, iterations
 
 
-def _readmit(graph, mask, kept, result, objective, width_sq, options):
+def _readmit(graph, mask, kept, result, objective, width_sq, options, leverage):
     """Re-admit the rejected loops that the other re-admitted loops make consistent, and settle.
 
     Candidates are the rejected loops whose innovation χ² against the solution is below c²
-    (``posegraph.leverage.innovations``): adding one alone would lower the TLS objective, to
+    (from ``leverage``, the probe estimates at ``result``): adding one alone would lower the TLS objective, to
     first order. A region that drifted while its true loops were rejected fits them badly
     (large s) but predicts the misfit (small innovation). So may a false loop between poorly
     constrained poses, by chance. The candidates are solved for together, and a candidate
@@ -185,12 +193,7 @@ def _readmit(graph, mask, kept, result, objective, width_sq, options):
     rejected = np.flatnonzero(mask & ~kept)
     if rejected.size == 0:
         return kept, None, objective, 0
-    innovation = innovations(
-        graph.with_edges(kept),
-        result.values,
-        graph.edges.subset(rejected),
-        linear_solver=options.linear_solver,
-    )
+    innovation = leverage.innovations(graph.edges.subset(rejected))
     candidates = rejected[innovation < width_sq]
     misfit = between_squares(result.values, graph.edges)
     values, iterations = result.values, 0
@@ -218,14 +221,12 @@ def _readmit(graph, mask, kept, result, objective, width_sq, options):
     return kept, None, objective, iterations
 
 
-def _drop(graph, mask, kept, result, objective, width_sq, options):
-    """Leave out, one at a time, the kept loops of largest deleted residual d²
-    (``posegraph.leverage.deleted_residuals``), keeping each removal that lowers the TLS
+def _drop(graph, mask, kept, result, objective, width_sq, options, leverage):
+    """Leave out, one at a time, the kept loops of largest deleted residual d² (from
+    ``leverage``, the probe estimates at ``result``), keeping each removal that lowers the TLS
     ``objective`` of ``result``. Returns (kept, result or None, its TLS objective, iterations)."""
     scores = np.zeros(graph.num_edges)
-    scores[kept] = deleted_residuals(
-        graph.with_edges(kept), result.values, linear_solver=options.linear_solver
-    ).innovation
+    scores[kept] = leverage.deleted_residuals().innovation
     # Dropping a loop lowers the objective when d² > c²; below c²/2 the estimate's error
     # (≈ 30%) cannot hide such a loop.
     candidates = np.flatnonzero(mask & kept & (scores > 0.5 * width_sq))

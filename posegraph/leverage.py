@@ -27,6 +27,7 @@ the deleted residual's s, can reach an order of magnitude.
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numpy as np
 
@@ -128,6 +129,57 @@ class DeletedResiduals:
     """‖(I − Mₑₑ)⁻¹ r̃ₑ‖²: the edge's s = rᵀΩr at that solution."""
 
 
+class Leverage:
+    """The estimates at one least-squares solution ``values`` of ``graph``, from K Rademacher
+    probes: H is factorised and the probes solved for once, on first use, and shared by the
+    deleted residuals of its edges and the innovations of any candidate edges."""
+
+    def __init__(
+        self,
+        graph: PoseGraph,
+        values: LieGroup,
+        probes: int = PROBES,
+        seed: int = 0,
+        linear_solver: str = "auto",
+    ) -> None:
+        self.graph, self.values = graph, values
+        self.probes, self.seed, self.linear_solver = probes, seed, linear_solver
+
+    @functools.cached_property
+    def _probed(self) -> tuple[_Factored, np.ndarray, np.ndarray]:
+        """H factorised, the probes z (K, m, d) and w = H⁻¹ Aᵀ z (num_nodes, d, K)."""
+        factored = _factorize(self.graph, self.values, self.linear_solver)
+        return factored, *factored.rademacher(self.probes, self.seed)
+
+    def deleted_residuals(self) -> DeletedResiduals:
+        """Estimated deleted residuals of every between edge of the graph."""
+        factored, z, w = self._probed
+        i, j = self.graph.edges.i, self.graph.edges.j
+        hat_z = factored.rows_i @ w[i] + factored.rows_j @ w[j]  # (m, d, K): (A w)ₑ
+        hat = hat_z @ np.moveaxis(z, 0, 2).swapaxes(1, 2) / self.probes  # Σₖ (A w)ₑ zₑᵀ / K
+        return _deleted(factored.whitened, hat)
+
+    def innovations(self, candidates: EdgeSet) -> np.ndarray:
+        """Estimated innovation χ² of each edge of ``candidates`` (edges over the graph's nodes
+        that it does not hold) against the solution."""
+        _, _, w = self._probed
+        whitened, rows_i, rows_j = _whitened(
+            linearize_between(self.values, candidates), candidates.information
+        )
+        samples = rows_i @ w[candidates.i] + rows_j @ w[candidates.j]  # (m, d, K)
+        predicted = samples @ np.swapaxes(samples, 1, 2) / self.probes
+        eigenvalues, projected = _eigen(whitened, np.eye(self.graph.group.dof) + predicted)
+        return (projected**2 / eigenvalues).sum(axis=1)
+
+
+def _deleted(whitened: np.ndarray, hat: np.ndarray) -> DeletedResiduals:
+    """Deleted residuals from r̃ₑ and the hat matrix's blocks Mₑₑ."""
+    eigenvalues, projected = _eigen(whitened, np.eye(hat.shape[-1]) - hat)
+    return DeletedResiduals(
+        (projected**2 / eigenvalues).sum(axis=1), (projected**2 / eigenvalues**2).sum(axis=1)
+    )
+
+
 def deleted_residuals(
     graph: PoseGraph,
     values: LieGroup,
@@ -138,25 +190,16 @@ def deleted_residuals(
 ) -> DeletedResiduals:
     """Deleted residuals at ``values`` (see the module docstring): exact for the between edges
     indexed by ``edges``, or estimated for all from ``probes`` Rademacher probes."""
-    factored = _factorize(graph, values, linear_solver, for_covariance=edges is not None)
-    i, j = graph.edges.i, graph.edges.j
     if edges is None:
-        z, w = factored.rademacher(probes, seed)
-        hat_z = factored.rows_i @ w[i] + factored.rows_j @ w[j]  # (m, d, K): (A w)ₑ
-        hat = hat_z @ np.moveaxis(z, 0, 2).swapaxes(1, 2) / probes  # Σₖ (A w)ₑ zₑᵀ / K
-        whitened = factored.whitened
-    else:
-        edges = np.asarray(edges, dtype=np.int64)
-        d = graph.group.dof
-        ends = list(np.stack([i[edges], j[edges]], axis=1))
-        covariances = np.array(joint_covariances(factored.system, ends)).reshape(-1, 2 * d, 2 * d)
-        rows = np.concatenate([factored.rows_i[edges], factored.rows_j[edges]], axis=2)
-        hat = rows @ covariances @ np.swapaxes(rows, 1, 2)  # Aₑ H⁻¹ Aₑᵀ
-        whitened = factored.whitened[edges]
-    eigenvalues, projected = _eigen(whitened, np.eye(graph.group.dof) - hat)
-    return DeletedResiduals(
-        (projected**2 / eigenvalues).sum(axis=1), (projected**2 / eigenvalues**2).sum(axis=1)
-    )
+        return Leverage(graph, values, probes, seed, linear_solver).deleted_residuals()
+    factored = _factorize(graph, values, linear_solver, for_covariance=True)
+    edges = np.asarray(edges, dtype=np.int64)
+    d = graph.group.dof
+    ends = list(np.stack([graph.edges.i[edges], graph.edges.j[edges]], axis=1))
+    covariances = np.array(joint_covariances(factored.system, ends)).reshape(-1, 2 * d, 2 * d)
+    rows = np.concatenate([factored.rows_i[edges], factored.rows_j[edges]], axis=2)
+    hat = rows @ covariances @ np.swapaxes(rows, 1, 2)  # Aₑ H⁻¹ Aₑᵀ
+    return _deleted(factored.whitened[edges], hat)
 
 
 def innovations(
@@ -169,12 +212,4 @@ def innovations(
 ) -> np.ndarray:
     """Estimated innovation χ² of each edge of ``candidates`` (edges over ``graph``'s nodes that
     it does not hold) against ``graph``'s solution ``values`` (see the module docstring)."""
-    factored = _factorize(graph, values, linear_solver)
-    _, w = factored.rademacher(probes, seed)
-    whitened, rows_i, rows_j = _whitened(
-        linearize_between(values, candidates), candidates.information
-    )
-    samples = rows_i @ w[candidates.i] + rows_j @ w[candidates.j]  # (m, d, K)
-    predicted = samples @ np.swapaxes(samples, 1, 2) / probes
-    eigenvalues, projected = _eigen(whitened, np.eye(graph.group.dof) + predicted)
-    return (projected**2 / eigenvalues).sum(axis=1)
+    return Leverage(graph, values, probes, seed, linear_solver).innovations(candidates)
