@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from posegraph.lie import SE2, SE3, SO2, SO3, LieGroup, Sim3
+from posegraph.lie.so3 import project_to_rotation
 
 from .helpers import assert_same_element, numerical_jacobian
 
@@ -135,6 +136,35 @@ def test_normalize_projects_drifted_rotations():
     )
     np.testing.assert_allclose(np.linalg.det(fixed.rotation), 1.0, atol=1e-14)
     assert_same_element(fixed, x, atol=1e-5)
+
+
+def test_project_to_rotation_2d_is_the_nearest_rotation():
+    """The closed form for 2 × 2 matrices against a search over a fine grid of angles: no
+    rotation on the grid is nearer in Frobenius norm, and the nearest one on the grid is within
+    the grid's spacing. Cases include a reflection and a matrix of determinant near 0."""
+    rng = np.random.default_rng(7)
+    matrices = np.concatenate(
+        [rng.normal(size=(50, 2, 2)), [[[1.0, 0.0], [0.0, -1.0]], [[1.0, 2.0], [0.5, 1.0]]]]
+    )
+    projected = project_to_rotation(matrices)
+    np.testing.assert_allclose(
+        projected @ np.swapaxes(projected, 1, 2),
+        np.broadcast_to(np.eye(2), matrices.shape),
+        atol=1e-14,
+    )
+    np.testing.assert_allclose(np.linalg.det(projected), 1.0, atol=1e-14)
+    grid = np.linspace(-np.pi, np.pi, 20001)
+    candidates = np.stack(
+        [np.stack([np.cos(grid), -np.sin(grid)], -1), np.stack([np.sin(grid), np.cos(grid)], -1)],
+        -2,
+    )
+    for matrix, rotation in zip(matrices, projected, strict=True):
+        distances = np.linalg.norm(candidates - matrix, axis=(1, 2))
+        assert np.linalg.norm(rotation - matrix) <= distances.min() + 1e-12
+        nearest = candidates[np.argmin(distances)]
+        assert np.linalg.norm(rotation - nearest) < 2 * (grid[1] - grid[0]) or np.allclose(
+            distances, distances[0]
+        )
 
 
 def test_sim3_from_general_homogeneous_matrix():

@@ -143,9 +143,17 @@ def jr_inv_matrix(phi: np.ndarray) -> np.ndarray:
 
 
 def project_to_rotation(matrix: np.ndarray) -> np.ndarray:
-    """The nearest rotation matrix (Frobenius norm) of (…, d, d) arrays, by SVD with the
-    determinant fixed to +1 (any d: also used for 2 × 2)."""
-    u, _, vt = np.linalg.svd(np.asarray(matrix, float))
+    """The nearest rotation matrix (Frobenius norm) of (…, d, d) arrays: by SVD with the
+    determinant fixed to +1, or for d = 2 in closed form, θ = atan2(m₁₀ − m₀₁, m₀₀ + m₁₁),
+    which maximises tr(R(θ)ᵀ M) = (m₀₀ + m₁₁) cos θ + (m₁₀ − m₀₁) sin θ."""
+    matrix = np.asarray(matrix, float)
+    if matrix.shape[-1] == 2:
+        theta = np.arctan2(
+            matrix[..., 1, 0] - matrix[..., 0, 1], matrix[..., 0, 0] + matrix[..., 1, 1]
+        )
+        cos, sin = np.cos(theta), np.sin(theta)
+        return np.stack([np.stack([cos, -sin], -1), np.stack([sin, cos], -1)], -2)
+    u, _, vt = np.linalg.svd(matrix)
     d = np.sign(np.linalg.det(u @ vt))
     u = u.copy()
     u[..., :, -1] *= d[..., None]
