@@ -63,24 +63,9 @@ _ROTATION_SERIES = np.array([_alternating(1), _alternating(2), _alternating(3)])
 """Series of sin θ/θ, (1 − cos θ)/θ² and (θ − sin θ)/θ³, one per column."""
 
 
-def sin_over(theta: np.ndarray) -> np.ndarray:
-    """sin θ / θ."""
-    return _coefficient(theta, lambda t: np.sin(t) / t, _ROTATION_SERIES[:, 0])
-
-
-def one_minus_cos_over_sq(theta: np.ndarray) -> np.ndarray:
-    """(1 − cos θ) / θ²."""
-    return _coefficient(theta, lambda t: (1.0 - np.cos(t)) / t**2, _ROTATION_SERIES[:, 1])
-
-
-def theta_minus_sin_over_cube(theta: np.ndarray) -> np.ndarray:
-    """(θ − sin θ) / θ³."""
-    return _coefficient(theta, lambda t: (t - np.sin(t)) / t**3, _ROTATION_SERIES[:, 2])
-
-
 def rotation_coefficients(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(sin θ/θ, (1 − cos θ)/θ², (θ − sin θ)/θ³) from one sin and cos evaluation, with the
-    series of ``sin_over`` and its siblings below ``_SERIES_BELOW``."""
+    """(sin θ/θ, (1 − cos θ)/θ², (θ − sin θ)/θ³) from one sin and cos evaluation, with their
+    series below ``_SERIES_BELOW``."""
 
     def closed_forms(t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         inverse = 1.0 / t

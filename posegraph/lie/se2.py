@@ -50,16 +50,13 @@ class SE2(LieGroup):
         t = np.broadcast_to(self.translation, self.batch_shape + (2,))
         return np.concatenate([t, np.broadcast_to(self.angle, self.batch_shape)[..., None]], -1)
 
-    @staticmethod
-    def _v_coefficients(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """V(θ) = a I + b J with a = sin θ / θ, b = (1 − cos θ) / θ (Eade eq. 69)."""
-        return _coeffs.sin_over(theta), theta * _coeffs.one_minus_cos_over_sq(theta)
-
     @classmethod
     def exp(cls, tangent: np.ndarray) -> SE2:
         tangent = np.asarray(tangent, float)
         rho, theta = tangent[..., :2], tangent[..., 2]
-        a, b = cls._v_coefficients(theta)
+        # V(θ) = a I + b J with a = sin θ / θ, b = (1 − cos θ) / θ (Eade eq. 69).
+        a, one_minus_cos_over_sq, _ = _coeffs.rotation_coefficients(theta)
+        b = theta * one_minus_cos_over_sq
         t = a[..., None] * rho + b[..., None] * (rho @ _J.T)
         return cls(_coeffs.wrap_angle(theta), t)
 
@@ -122,9 +119,8 @@ class SE2(LieGroup):
         c = (θ − sin θ)/θ², d = (1 − cos θ)/θ² (Chirikjian vol. 2 §10.6; manif SE2::rjac)."""
         tangent = np.asarray(tangent, float)
         x, y, theta = tangent[..., 0], tangent[..., 1], tangent[..., 2]
-        a, b = cls._v_coefficients(theta)
-        c = theta * _coeffs.theta_minus_sin_over_cube(theta)  # (θ − sin θ) / θ²
-        d = _coeffs.one_minus_cos_over_sq(theta)  # (1 − cos θ) / θ²
+        a, d, theta_minus_sin_over_cube = _coeffs.rotation_coefficients(theta)
+        b, c = theta * d, theta * theta_minus_sin_over_cube
         jr = np.zeros(tangent.shape[:-1] + (3, 3))
         jr[..., 0, 0] = a
         jr[..., 0, 1] = b
