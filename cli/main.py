@@ -168,7 +168,13 @@ def _parser() -> argparse.ArgumentParser:
     drift.add_argument("--overwrite", action="store_true", help="allow -o to be the input file")
 
     bench = command("bench", "time posegraph against gtsam on the benchmark graphs", [common])
-    bench.add_argument("--repeats", type=int, default=3)
+    bench.add_argument("--repeats", type=int, default=3, help="runs per round (default 3)")
+    bench.add_argument(
+        "--rounds",
+        type=int,
+        default=2,
+        help="rounds in which gtsam and posegraph take turns; the best run counts (default 2)",
+    )
     bench.add_argument("--graphs", nargs="*", metavar="NAME", help="default: all found")
     return parser
 
