@@ -27,17 +27,23 @@ from .so3 import (
 
 
 def _q_right(rho: np.ndarray, phi: np.ndarray) -> np.ndarray:
-    """Barfoot's Q(−ρ, −φ): the upper-right block of the SE(3) right Jacobian."""
-    theta = angle(phi)
-    p, r = hat3(phi), hat3(rho)
-    pr, rp = p @ r, r @ p
-    prp = pr @ p
-    c1, c2, c3 = (c[..., None, None] for c in _coeffs.se3_q_coefficients(theta))
+    """Barfoot's Q(−ρ, −φ): the upper-right block of the SE(3) right Jacobian.
+
+    Eq. 7.86 at (−ρ, −φ) is Σ of products of ρ× and φ×. With s = φ·ρ, u = φ × ρ and the
+    identities a× b× = b aᵀ − (a·b) I and (a × b)× = b aᵀ − a bᵀ, every product reduces to
+    I, φ×, φ×², ρ×, (u × φ)× and ρφᵀ + φρᵀ:
+    Q = −2c₁s I + (c₁ − c₂)s φ× − 2c₃s φ×² + (c₂ (u × φ) − ½ρ)× + c₁ (ρφᵀ + φρᵀ),
+    where c₁, c₂, c₃ are the coefficients of eq. 7.86 (``se3_q_coefficients``).
+    """
+    rho, phi = np.asarray(rho, float), np.asarray(phi, float)
+    c1, c2, c3 = _coeffs.se3_q_coefficients(angle(phi))
+    s = np.einsum("...i,...i->...", phi, rho)
+    u = _coeffs.cross(phi, rho)
+    outer = rho[..., :, None] * phi[..., None, :]
     return (
-        -0.5 * r
-        + c1 * (pr + rp - prp)
-        + c2 * (-(p @ pr) - rp @ p + 3.0 * prp)
-        + c3 * (prp @ p + p @ prp)
+        so3_polynomial(phi, -2.0 * c1 * s, (c1 - c2) * s, -2.0 * c3 * s)
+        + hat3(c2[..., None] * _coeffs.cross(u, phi) - 0.5 * rho)
+        + c1[..., None, None] * (outer + np.swapaxes(outer, -1, -2))
     )
 
 
