@@ -179,17 +179,17 @@ def _settle(graph, mask, kept, values, width_sq, options, restart: bool):
 def _readmit(graph, mask, kept, result, objective, width_sq, options, leverage):
     """Re-admit the rejected loops that the other re-admitted loops make consistent, and settle.
 
-    Candidates are the rejected loops whose innovation χ² against the solution is below c²
-    (from ``leverage``, the probe estimates at ``result``): adding one alone would lower the TLS objective, to
-    first order. A region that drifted while its true loops were rejected fits them badly
-    (large s) but predicts the misfit (small innovation). So may a false loop between poorly
-    constrained poses, by chance. The candidates are solved for together, and a candidate
+    Candidates are the rejected loops whose innovation χ² against the solution is below c² (from
+    ``leverage``, the probe estimates at ``result``): adding one alone would lower the TLS
+    objective, to first order. A region that drifted while its true loops were rejected fits
+    them badly (large s) but predicts the misfit (small innovation). So may a false loop between
+    poorly constrained poses, by chance. The candidates are solved for together, and a candidate
     stays one only if the others explain it: its s at the joint solution fitted without it (its
     exact deleted residual) is at most c², or at most ``1 − EXPLAINED`` of its s before. This
     repeats over the remaining candidates until all are explained, then the kept set with them
     is settled. The loops of a drifted region pull it back for each other; a lone false loop is
-    consistent only with the solution bent to fit it, and without it, its misfit is what it
-    was. Returns (kept, result or None, its TLS objective, iterations)."""
+    consistent only with the solution bent to fit it, and without it, its misfit is what it was.
+    Returns (kept, result or None, its TLS objective, iterations)."""
     rejected = np.flatnonzero(mask & ~kept)
     if rejected.size == 0:
         return kept, None, objective, 0

@@ -15,6 +15,7 @@ import numpy as np
 from . import _coeffs
 from ._coeffs import hat3, so3_polynomial, vee3
 from .base import LieGroup
+from .so2 import rotation_matrix_2d
 
 # Below this cos θ (θ above ≈ 2.69) the rotation axis is read from the quaternion instead of
 # the skew part of R, whose norm sin θ vanishes at π.
@@ -151,8 +152,7 @@ def project_to_rotation(matrix: np.ndarray) -> np.ndarray:
         theta = np.arctan2(
             matrix[..., 1, 0] - matrix[..., 0, 1], matrix[..., 0, 0] + matrix[..., 1, 1]
         )
-        cos, sin = np.cos(theta), np.sin(theta)
-        return np.stack([np.stack([cos, -sin], -1), np.stack([sin, cos], -1)], -2)
+        return rotation_matrix_2d(theta)
     u, _, vt = np.linalg.svd(matrix)
     d = np.sign(np.linalg.det(u @ vt))
     u = u.copy()
