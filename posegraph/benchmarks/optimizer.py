@@ -72,7 +72,9 @@ def time_posegraph(graph: PoseGraph, repeats: int, init: str) -> tuple[float, Su
     return best, result.summary
 
 
-def side_by_side(graph: PoseGraph, repeats: int, rounds: int):
+def side_by_side(
+    graph: PoseGraph, repeats: int, rounds: int
+) -> tuple[tuple[float, int, float], tuple[float, Summary], tuple[float, Summary]]:
     """``time_gtsam``, then ``time_posegraph`` from the graph's values and with ``init="auto"``,
     taking turns for ``rounds`` rounds; the best of each: ((seconds, iterations, error),
     (seconds, summary), (seconds, summary))."""
