@@ -130,8 +130,9 @@ def so3_jr_inv_coefficient_from_trig(
 
 
 def half_cot_half(theta: np.ndarray) -> np.ndarray:
-    """(θ/2) cot(θ/2) = θ sin θ / (2 (1 − cos θ)), used by the SE(2) logarithm."""
-    series = [1.0, -1 / 12, -1 / 720, -1 / 30240, -1 / 1209600]
+    """(θ/2) cot(θ/2) = θ sin θ / (2 (1 − cos θ)), used by the SE(2) logarithm. Its series is
+    1 − θ² times that of ``so3_jr_inv_coefficient``."""
+    series = [1.0, *(-c for c in _JR_INV_SERIES)]
     return _coefficient(theta, lambda t: 0.5 * t * np.sin(t) / (1.0 - np.cos(t)), series)
 
 
