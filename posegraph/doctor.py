@@ -137,7 +137,8 @@ def diagnose(read: ReadResult) -> Diagnosis:
         problems.append(
             Problem(
                 f"{read.nodes_without_vertex.size} node(s) have no vertex line",
-                "they were initialised by composing odometry; use --init chordal for a better start",
+                "the initial error above is of values composed from odometry; optimize (default --init auto) "
+                "starts a graph with loops from chordal relaxation instead",
             )
         )
     total = chi2(graph.values, graph.edges, graph.priors)
