@@ -42,8 +42,28 @@ def _refuse_to_overwrite(source: str, target: str | None, allowed: bool) -> None
         )
 
 
+def _check_output(path: str | None, to: str | None = None, figure: bool = False) -> None:
+    """Fail before any work if ``path`` cannot be written: a format not known by its suffix
+    (or ``to``), or a folder that does not exist."""
+    if path is None:
+        return
+    if figure:
+        from posegraph.plotting import check_figure_path
+
+        check_figure_path(path)
+    else:
+        output_format(path, to)
+    folder = os.path.dirname(path) or "."
+    if not os.path.isdir(folder):
+        raise UsageError(f"{path}: cannot write: there is no folder {folder}")
+    if os.path.isdir(path):
+        raise UsageError(f"{path}: is a folder, not a file")
+
+
 def optimize(args: argparse.Namespace) -> int:
     _refuse_to_overwrite(args.input, args.output, args.overwrite)
+    _check_output(args.output)
+    _check_output(args.plot, figure=True)
     read = read_graph(args.input, _options(args))
     graph = read.graph
     if args.fix:
@@ -106,6 +126,10 @@ def info(args: argparse.Namespace) -> int:
 
 def convert(args: argparse.Namespace) -> int:
     _refuse_to_overwrite(args.input, args.output, args.overwrite)
+    try:
+        _check_output(args.output, args.to)
+    except ValueError as error:
+        raise UsageError(f"{error}; say --to g2o|toro|tum|kitti") from None
     graph = read_graph(args.input, _options(args)).graph
     written = convert_graph(
         graph, args.output, args.to, args.sim3_dialect, args.g2o_rotation_information
@@ -125,6 +149,7 @@ def convert(args: argparse.Namespace) -> int:
 def plot(args: argparse.Namespace) -> int:
     from posegraph.plotting import plot_graphs
 
+    _check_output(args.output, figure=True)
     graphs = [(os.path.basename(p), read_graph(p, _options(args)).graph) for p in args.inputs]
     plot_graphs(graphs, args.output, title=args.title, view=args.view)
     record = {"command": "plot", "inputs": args.inputs, "output": args.output}
@@ -133,6 +158,7 @@ def plot(args: argparse.Namespace) -> int:
 
 
 def eval(args: argparse.Namespace) -> int:  # noqa: A001 - the subcommand's name
+    _check_output(args.plot, figure=True)
     estimate = load_trajectory(args.estimate, _options(args))
     truth = load_trajectory(args.ground_truth, _options(args))
     evaluation = evaluate(estimate, truth, args.align, args.delta)
@@ -163,6 +189,8 @@ def scale_drift(args: argparse.Namespace) -> int:
     from posegraph.trajectory_io import Trajectory, as_se3, write_trajectory
 
     _refuse_to_overwrite(args.input, args.output, args.overwrite)
+    _check_output(args.output)
+    _check_output(args.plot, figure=True)
     graph = read_graph(args.input, _options(args)).graph
     before = Trajectory(graph.node_ids.astype(float), as_se3(graph.values))
     correction = correct_scale_drift(graph, args.scale_information, args.convention)

@@ -30,8 +30,7 @@ def output_format(path: str, requested: str | None = None) -> str:
     if suffix not in SUFFIX_FORMATS:
         known = ", ".join(SUFFIX_FORMATS)
         raise ValueError(
-            f"{path}: cannot tell the output format from {suffix or 'no suffix'!r} "
-            f"(known: {known}); say --to g2o|toro|tum|kitti"
+            f"{path}: cannot tell the output format from {suffix or 'no suffix'!r} (known: {known})"
         )
     return SUFFIX_FORMATS[suffix]
 

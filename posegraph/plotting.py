@@ -7,8 +7,6 @@ SE2 graphs are drawn top-down; SE3 and Sim3 in 3D (or top-down with ``view="top"
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 import matplotlib
@@ -17,11 +15,13 @@ matplotlib.use("Agg")
 
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.backend_bases import FigureCanvasBase  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
 from mpl_toolkits.mplot3d.art3d import Line3DCollection  # noqa: E402
 
 from .graph import PoseGraph  # noqa: E402
 from .initialization import odometry_mask  # noqa: E402
+from .io.atomic import atomic_path  # noqa: E402
 from .lie import SE2  # noqa: E402
 from .trajectory_io import as_se3  # noqa: E402
 
@@ -71,19 +71,25 @@ def _finish(figure, axes, three_d: bool, title: str | None, path: str) -> None:
     save_figure(figure, path)
 
 
+def check_figure_path(path: str) -> None:
+    """Raise ``ValueError`` naming ``path`` if matplotlib cannot write its suffix's format."""
+    supported = FigureCanvasBase.get_supported_filetypes()
+    suffix = Path(path).suffix.lower().lstrip(".")
+    if suffix not in supported:
+        raise ValueError(
+            f"{path}: cannot draw a figure as {suffix or 'no suffix'!r} "
+            f"(known: {', '.join(sorted(supported))})"
+        )
+
+
 def save_figure(figure, path: str) -> None:
-    """Save atomically (temporary file beside the target, then rename) and close."""
-    target = Path(path)
-    handle, temporary = tempfile.mkstemp(
-        prefix=f".{target.stem}.", suffix=target.suffix, dir=target.parent or "."
-    )
-    os.close(handle)
+    """Save atomically (``atomic_path``) and close."""
+    check_figure_path(path)
     try:
-        figure.savefig(temporary, bbox_inches="tight")
-        os.replace(temporary, target)
+        with atomic_path(path) as temporary:
+            figure.savefig(temporary, bbox_inches="tight")
     finally:
         plt.close(figure)
-        Path(temporary).unlink(missing_ok=True)
 
 
 def plot_graphs(

@@ -121,6 +121,27 @@ def test_optimize_refuses_to_overwrite_its_input(tmp_path):
     assert source.read_text() != before
 
 
+def test_outputs_are_checked_before_any_work(tmp_path):
+    """A figure format matplotlib cannot write, a missing folder or an unknown suffix stops the
+    command at once, in one line naming the path, before anything is optimised or written."""
+    out = tmp_path / "out.g2o"
+    cases = [
+        (["optimize", EXAMPLE, "-o", out, "--plot", tmp_path / "fig.xyz"], "fig.xyz"),
+        (["optimize", EXAMPLE, "-o", out, "--plot", tmp_path / "no" / "f.png"], "f.png"),
+        (["optimize", EXAMPLE, "-o", tmp_path / "no" / "out.g2o"], "no/out.g2o"),
+        (["optimize", EXAMPLE, "-o", tmp_path / "out.txt"], "out.txt"),
+        (["convert", EXAMPLE, tmp_path / "out.txt"], "say --to"),
+        (["scale-drift", EXAMPLE, "-o", out, "--plot", tmp_path / "d.bmp"], "d.bmp"),
+        (["plot", EXAMPLE, "-o", tmp_path / "p.doc"], "p.doc"),
+        (["eval", EXAMPLE, EXAMPLE, "--plot", tmp_path / "no" / "e.png"], "e.png"),
+    ]
+    for args, named in cases:
+        failed = run(*args, check_exit=2)
+        assert failed.stderr.count("\n") == 1 and named in failed.stderr, args
+        assert "Traceback" not in failed.stderr and "/." not in failed.stderr  # no temporary
+        assert list(tmp_path.iterdir()) == [], args
+
+
 def test_optimize_options(tmp_path):
     document = run_json(
         "optimize", EXAMPLE_2D, "--solver", "gn", "--init", "odometry", "--fix", "3", "7"

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+import stat
+
 import numpy as np
 import pytest
 
@@ -216,6 +219,27 @@ def test_writes_are_atomic_and_leave_no_temporary_files(tmp_path):
     with pytest.raises(ValueError):
         write_graph(random_graph(Sim3, 3, 0, seed=40), str(tmp_path / "x.graph"))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out.g2o"]
+
+
+def test_written_files_get_the_usual_permissions_and_errors_name_the_target(tmp_path):
+    """``mkstemp`` makes owner-only files; the output gets the umask's mode when new and keeps
+    its mode when replaced. A failure names the file asked for, not the temporary."""
+    graph = random_graph(SE2, 4, 1, seed=41)
+    umask = os.umask(0o022)
+    try:
+        write_graph(graph, str(tmp_path / "new.g2o"))
+    finally:
+        os.umask(umask)
+    assert stat.S_IMODE((tmp_path / "new.g2o").stat().st_mode) == 0o644
+    kept = tmp_path / "kept.g2o"
+    kept.write_text("old\n")
+    kept.chmod(0o640)
+    write_graph(graph, str(kept))
+    assert stat.S_IMODE(kept.stat().st_mode) == 0o640
+    missing = tmp_path / "no" / "such" / "out.g2o"
+    with pytest.raises(OSError) as raised:
+        write_graph(graph, str(missing))
+    assert raised.value.filename == str(missing)
 
 
 def test_reading_sphere2500_is_fast_enough_to_matter(shared_dataset):

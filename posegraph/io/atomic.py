@@ -3,18 +3,54 @@
 from __future__ import annotations
 
 import os
+import stat
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 
-def atomic_write_text(path: str | os.PathLike, text: str) -> None:
-    """Write ``text`` to ``path`` so that readers see the old file or the new one, never half."""
-    target = Path(path)
-    handle, temporary = tempfile.mkstemp(prefix=f".{target.name}.", dir=target.parent or ".")
+def _file_mode(target: Path) -> int:
+    """The permissions the target keeps if it exists, else those a new file gets (0o666 less
+    the umask); ``mkstemp`` itself creates files readable by their owner alone."""
     try:
-        with os.fdopen(handle, "w") as stream:
-            stream.write(text)
-        os.replace(temporary, target)
-    except BaseException:
+        return stat.S_IMODE(target.stat().st_mode)
+    except FileNotFoundError:
+        umask = os.umask(0)
+        os.umask(umask)
+        return 0o666 & ~umask
+
+
+@contextmanager
+def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
+    """A temporary path beside ``path`` (same suffix, so writers that go by it still can) to
+    write to; renamed over ``path`` when the block ends, removed if it raises. Readers see the
+    old file or the new one, never half. The file gets ``path``'s permissions (``_file_mode``).
+    An ``OSError`` names ``path``, not the temporary."""
+    target = Path(path)
+
+    def failed(error: OSError) -> OSError:
+        return OSError(error.errno, f"cannot write: {error.strerror}", str(target))
+
+    try:
+        handle, temporary = tempfile.mkstemp(
+            prefix=f".{target.stem}.", suffix=target.suffix, dir=target.parent
+        )
+    except OSError as error:
+        raise failed(error) from None
+    os.close(handle)
+    try:
+        yield Path(temporary)
+        try:
+            os.chmod(temporary, _file_mode(target))
+            os.replace(temporary, target)
+        except OSError as error:
+            raise failed(error) from None
+    finally:
         Path(temporary).unlink(missing_ok=True)
-        raise
+
+
+def atomic_write_text(path: str | os.PathLike, text: str) -> None:
+    """Write ``text`` to ``path`` atomically (``atomic_path``)."""
+    with atomic_path(path) as temporary:
+        temporary.write_text(text)
