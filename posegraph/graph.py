@@ -175,14 +175,46 @@ class PoseGraph:
             self.add_nodes([node_id], value if value is None else self._elements(value, 1))[0]
         )
 
+    def _information(self, information, i: np.ndarray, j: np.ndarray | None) -> np.ndarray:
+        """(k, d, d) information of measurements on nodes i → j (priors: j None) from one
+        (d, d) or (k, d, d). Each must be finite, symmetric and positive semi-definite (a zero
+        eigenvalue is a direction not measured); else ``ValueError`` names the measurement."""
+        d, count = self.group.dof, i.size
+        information = np.asarray(information, float)
+        if information.shape not in ((d, d), (count, d, d)):
+            stacked = f" (or {count} × {d} × {d} for {count} measurements)" if count > 1 else ""
+            raise ValueError(
+                f"information must be {d} × {d} for {self.group.__name__}{stacked}, "
+                f"not of shape {information.shape}"
+            )
+        information = np.broadcast_to(information, (count, d, d)).copy()
+        with np.errstate(invalid="ignore"):
+            size = np.abs(information).max(axis=(1, 2))  # NaN or ∞ where an entry is
+            asymmetry = np.abs(information - np.swapaxes(information, 1, 2)).max(axis=(1, 2))
+        symmetric = np.isfinite(size) & (asymmetry <= 1e-9 * size)
+        smallest = np.full(count, -np.inf)
+        smallest[symmetric] = np.linalg.eigvalsh(information[symmetric])[:, 0]
+        bad = np.flatnonzero(~symmetric | ~(smallest >= -1e-9 * size))
+        if bad.size:
+            k = int(bad[0])
+            if not np.isfinite(size[k]):
+                what = "not finite"
+            elif not symmetric[k]:
+                what = "not symmetric"
+            else:
+                what = f"not positive semi-definite (λ_min = {smallest[k]:.3g})"
+            ids = self.node_ids
+            on = f"prior on node {ids[i[k]]}" if j is None else f"edge {ids[i[k]]} → {ids[j[k]]}"
+            raise ValueError(f"information of the {on} is {what}")
+        return information
+
     def _edge_set(self, i_ids, j_ids, measurements, information) -> EdgeSet:
+        """Measurements on nodes i → j, or priors on nodes i if ``j_ids`` is None."""
         i = self.index(i_ids)
-        j = self.index(j_ids)
-        count = i.size
-        measurements = self._elements(measurements, count)
-        d = self.group.dof
-        information = np.broadcast_to(np.asarray(information, float), (count, d, d)).copy()
-        return EdgeSet(i, j, measurements, information)
+        j = None if j_ids is None else self.index(j_ids)
+        measurements = self._elements(measurements, i.size)
+        information = self._information(information, i, j)
+        return EdgeSet(i, i if j is None else j, measurements, information)
 
     def add_edges(self, i_ids, j_ids, measurements, information) -> np.ndarray:
         """Add between edges i → j measuring Z ≈ Xᵢ⁻¹ Xⱼ (elements or (k, n, n) matrices) with
@@ -201,7 +233,7 @@ class PoseGraph:
 
     def add_priors(self, node_ids, measurements, information) -> np.ndarray:
         """Add priors Z ≈ Xᵢ; returns their prior indices."""
-        new = self._edge_set(node_ids, node_ids, measurements, information)
+        new = self._edge_set(node_ids, None, measurements, information)
         start = len(self.priors)
         self.priors = self.priors.extended(new)
         self.structure_version += 1

@@ -185,7 +185,10 @@ class BlockPattern:
         return np.bincount(self._vector_positions, pieces.reshape(-1), self.size + 1)[:-1]
 
     def factorize(self, data: np.ndarray, damping: np.ndarray | None = None) -> None:
-        """Factorise the matrix plus diag(damping); raises ``NotPositiveDefinite`` on failure."""
+        """Factorise the matrix plus diag(damping); raises ``NotPositiveDefinite`` on failure.
+        An empty matrix (every node held) has nothing to factorise."""
+        if self.size == 0:
+            return
         if damping is not None:
             data = data.copy()
             data[self.diagonal_positions] += damping

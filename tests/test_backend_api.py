@@ -38,6 +38,34 @@ def test_batch_and_single_editing_with_arrays():
         graph.add_node(12, SE2.identity())
 
 
+def test_information_is_checked_where_it_is_given():
+    """Shape, finiteness, symmetry and positive semi-definiteness, with the measurement named;
+    a zero eigenvalue (a direction not measured, as a position-only prior) is accepted."""
+    graph = PoseGraph(SE2)
+    graph.add_nodes([4, 5, 6], SE2.identity((3,)))
+    z = SE2.identity()
+    cases = [
+        (np.eye(2), r"must be 3 × 3 for SE2, not of shape \(2, 2\)"),
+        (np.diag([1.0, np.nan, 1.0]), "edge 4 → 5 is not finite"),
+        (np.diag([1.0, np.inf, 1.0]), "edge 4 → 5 is not finite"),
+        (np.triu(np.ones((3, 3))), "edge 4 → 5 is not symmetric"),
+        (np.diag([1.0, -2.0, 1.0]), r"edge 4 → 5 is not positive semi-definite \(λ_min = -2\)"),
+    ]
+    for information, message in cases:
+        with pytest.raises(ValueError, match=message):
+            graph.add_edge(4, 5, z, information)
+    stacked = np.stack([np.eye(3), -np.eye(3)])
+    with pytest.raises(ValueError, match="edge 5 → 6 is not positive"):
+        graph.add_edges([4, 5], [5, 6], SE2.identity((2,)), stacked)
+    with pytest.raises(ValueError, match=r"or 2 × 3 × 3 for 2 measurements"):
+        graph.add_edges([4, 5], [5, 6], SE2.identity((2,)), np.ones((3, 3, 3)))
+    with pytest.raises(ValueError, match="prior on node 6 is not positive"):
+        graph.add_prior(6, z, -np.eye(3))
+    assert graph.num_edges == 0 and len(graph.priors) == 0
+    graph.add_prior(6, z, np.diag([1.0, 1.0, 0.0]))
+    assert len(graph.priors) == 1
+
+
 def test_components_follow_every_edit():
     """``components`` is cached: each edit of nodes or edges must be seen."""
     graph = PoseGraph(SE2)
@@ -172,6 +200,9 @@ def test_marginals_are_blocks_of_the_inverse_information():
     assert np.all(posegraph.marginals(graph, graph.node_ids[held]) == 0)  # the gauge is exact
     assert posegraph.marginals(graph, []).shape == (0, 6, 6)
     assert posegraph.marginals(graph, [], joint=True).shape == (0, 0)
+    every_node_held = graph.copy()
+    every_node_held.fix(graph.node_ids)
+    assert np.all(posegraph.marginals(every_node_held, graph.node_ids[:2]) == 0)
     for backend in ("scipy",):
         np.testing.assert_allclose(
             posegraph.marginals(graph, nodes, linear_solver=backend), cov, rtol=1e-8
