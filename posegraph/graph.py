@@ -12,7 +12,7 @@ values, so a back end can extend it and optimise again from the last solution.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 
 import numpy as np
 
@@ -66,10 +66,15 @@ class EdgeSet:
 class PoseGraph:
     """A pose graph over one group (SE2, SE3 or Sim3)."""
 
-    def __init__(self, group: type[LieGroup]) -> None:
-        if group not in POSE_GROUPS:
-            names = ", ".join(g.__name__ for g in POSE_GROUPS)
-            raise ValueError(f"a pose graph holds one of {names}, not {group.__name__}")
+    def __init__(self, group: type[LieGroup] | str) -> None:
+        """``group``: SE2, SE3 or Sim3, the class or its name."""
+        by_name = {g.__name__: g for g in POSE_GROUPS}
+        if by_name.get(group, group) not in POSE_GROUPS:
+            names = ", ".join(by_name)
+            raise ValueError(
+                f"a pose graph holds one of {names}, not {getattr(group, '__name__', repr(group))}"
+            )
+        group = by_name.get(group, group)
         self.group = group
         self.node_ids = np.zeros(0, dtype=np.int64)
         self.values: LieGroup = group.identity((0,))
@@ -131,16 +136,61 @@ class PoseGraph:
         values = self.values if node_ids is None else self.values_of(node_ids)
         return np.array(values.translation)
 
-    def _elements(self, values, count: int) -> LieGroup:
-        """The group's elements from elements or (…, n, n) matrices, broadcast to ``count``."""
+    def _elements(self, values, count: int, describe: Callable[[int], str]) -> LieGroup:
+        """``count`` elements of the group from elements or (…, n, n) matrices (one is
+        broadcast). Elements must be finite and are otherwise taken as they are. Matrices are
+        normalised: rounding drift is projected away, but one whose linear block has determinant
+        ≤ 0, or that is off the group by more than 1e-4 (relative to its linear block), is
+        refused. A refusal is a ``ValueError`` naming ``describe(k)`` for the k-th."""
+        group, n = self.group, self.group.matrix_size
         if isinstance(values, LieGroup):
-            if not isinstance(values, self.group):
+            if not isinstance(values, group):
                 raise TypeError(
-                    f"values are {type(values).__name__}, the graph is {self.group.__name__}"
+                    f"values are {type(values).__name__}, the graph is {group.__name__}"
                 )
+            values = values if values.batch_shape == (count,) else values.broadcast_to((count,))
+            given = None
         else:
-            values = self.group.from_matrix(np.asarray(values, float))
-        return values if values.batch_shape == (count,) else values.broadcast_to((count,))
+            given = np.asarray(values, float)
+            if given.shape not in ((n, n), (count, n, n)):
+                stacked = f" (or {count} × {n} × {n})" if count > 1 else ""
+                raise ValueError(
+                    f"{group.__name__} matrices are {n} × {n}{stacked}, not of shape {given.shape}"
+                )
+            given = np.broadcast_to(given, (count, n, n))
+        fields = (
+            [getattr(values, name) for name in group._event_ndims] if given is None else [given]
+        )
+        finite = np.ones(count, dtype=bool)
+        for field in fields:
+            finite &= np.isfinite(field.reshape(count, -1)).all(axis=1)
+        if not finite.all():
+            raise ValueError(f"{describe(int(np.flatnonzero(~finite)[0]))} is not finite")
+        if given is None:
+            return values
+        corner, linear = given[:, -1, -1], given[:, :-1, :-1]
+        determinant = np.linalg.det(linear)
+        degenerate = np.flatnonzero(~(np.abs(corner - 1) <= 1e-4) | ~(determinant > 0))
+        if degenerate.size:  # refused before the projection, which needs det > 0
+            k = int(degenerate[0])
+            why = (
+                f"determinant {determinant[k]:.3g}"
+                if np.abs(corner[k] - 1) <= 1e-4
+                else f"a last entry of {corner[k]:.3g}, not 1"
+            )
+            raise ValueError(
+                f"{describe(k)} is not an element of {group.__name__} (its matrix has {why})"
+            )
+        normalized = group.from_matrix(given).normalize()
+        off = np.abs(normalized.as_matrix() - given).max(axis=(1, 2))
+        bad = np.flatnonzero(off > 1e-4 * np.maximum(np.abs(linear).max(axis=(1, 2)), 1))
+        if bad.size:
+            k = int(bad[0])
+            raise ValueError(
+                f"{describe(k)} is not an element of {group.__name__} (its matrix is off the "
+                f"group by {off[k]:.3g})"
+            )
+        return normalized
 
     # ------------------------------------------------------------------------ growth
     def add_nodes(self, node_ids, values: LieGroup | np.ndarray | None = None) -> np.ndarray:
@@ -152,7 +202,11 @@ class PoseGraph:
         """
         ids = np.atleast_1d(np.asarray(node_ids, dtype=np.int64))
         has_values = values is not None
-        values = self._elements(values, ids.size) if has_values else self.group.identity(ids.shape)
+        values = (
+            self._elements(values, ids.size, lambda k: f"the value of node {ids[k]}")
+            if has_values
+            else self.group.identity(ids.shape)
+        )
         unique, counts = np.unique(ids, return_counts=True)
         if np.any(counts > 1):
             raise ValueError(f"node id {unique[counts > 1][0]} is given twice")
@@ -171,15 +225,13 @@ class PoseGraph:
 
     def add_node(self, node_id: int, value: LieGroup | np.ndarray | None = None) -> int:
         """Add one node (see ``add_nodes``); returns its index."""
-        return int(
-            self.add_nodes([node_id], value if value is None else self._elements(value, 1))[0]
-        )
+        return int(self.add_nodes([node_id], value)[0])
 
-    def _information(self, information, i: np.ndarray, j: np.ndarray | None) -> np.ndarray:
-        """(k, d, d) information of measurements on nodes i → j (priors: j None) from one
-        (d, d) or (k, d, d). Each must be finite, symmetric and positive semi-definite (a zero
-        eigenvalue is a direction not measured); else ``ValueError`` names the measurement."""
-        d, count = self.group.dof, i.size
+    def _information(self, information, count: int, describe: Callable[[int], str]) -> np.ndarray:
+        """(count, d, d) information from one (d, d) or (count, d, d). Each must be finite,
+        symmetric and positive semi-definite (a zero eigenvalue is a direction not measured);
+        else ``ValueError`` names ``describe(k)`` for the k-th."""
+        d = self.group.dof
         information = np.asarray(information, float)
         if information.shape not in ((d, d), (count, d, d)):
             stacked = f" (or {count} × {d} × {d} for {count} measurements)" if count > 1 else ""
@@ -203,17 +255,24 @@ class PoseGraph:
                 what = "not symmetric"
             else:
                 what = f"not positive semi-definite (λ_min = {smallest[k]:.3g})"
-            ids = self.node_ids
-            on = f"prior on node {ids[i[k]]}" if j is None else f"edge {ids[i[k]]} → {ids[j[k]]}"
-            raise ValueError(f"information of the {on} is {what}")
+            raise ValueError(f"{describe(k)} is {what}")
         return information
 
     def _edge_set(self, i_ids, j_ids, measurements, information) -> EdgeSet:
         """Measurements on nodes i → j, or priors on nodes i if ``j_ids`` is None."""
         i = self.index(i_ids)
         j = None if j_ids is None else self.index(j_ids)
-        measurements = self._elements(measurements, i.size)
-        information = self._information(information, i, j)
+        ids = self.node_ids
+
+        def on(k: int) -> str:
+            return f"prior on node {ids[i[k]]}" if j is None else f"edge {ids[i[k]]} → {ids[j[k]]}"
+
+        measurements = self._elements(
+            measurements, i.size, lambda k: f"the measurement of the {on(k)}"
+        )
+        information = self._information(
+            information, i.size, lambda k: f"the information of the {on(k)}"
+        )
         return EdgeSet(i, i if j is None else j, measurements, information)
 
     def add_edges(self, i_ids, j_ids, measurements, information) -> np.ndarray:

@@ -66,6 +66,39 @@ def test_information_is_checked_where_it_is_given():
     assert len(graph.priors) == 1
 
 
+def test_values_and_measurements_are_checked_where_they_are_given():
+    """Matrices off the group (a transposed pose, a scaled rotation, a wrong last row) or not
+    finite are refused with the node or measurement named; rounding drift is projected away."""
+    graph = PoseGraph("SE3")
+    pose = SE3.exp(np.array([1.0, 2.0, 3.0, 0.1, 0.2, 0.3])).as_matrix()
+    bottom = np.eye(4)
+    bottom[3, :3] = 1.0
+    cases = [
+        (np.eye(3), r"SE3 matrices are 4 × 4, not of shape \(3, 3\)"),
+        (pose.T, "the value of node 5 is not an element of SE3"),
+        (np.diag([2.0, 1.0, 1.0, 1.0]), "the value of node 5 is not an element of SE3"),
+        (bottom, "the value of node 5 is not an element of SE3"),
+        (np.full((4, 4), np.nan), "the value of node 5 is not finite"),
+        (SE3(np.eye(3), np.array([np.inf, 0.0, 0.0])), "the value of node 5 is not finite"),
+    ]
+    for value, message in cases:
+        with pytest.raises(ValueError, match=message):
+            graph.add_node(5, value)
+    with pytest.raises(ValueError, match="the value of node 8 is not an element"):
+        graph.add_nodes([6, 7, 8], np.stack([pose, pose, np.diag([1.0, 1.0, -1.0, 1.0])]))
+    assert graph.num_nodes == 0
+    graph.add_nodes([5, 6], np.stack([pose + 1e-7, pose]))
+    rotation = graph.values.rotation[0]
+    np.testing.assert_allclose(rotation.T @ rotation, np.eye(3), atol=1e-15)
+    np.testing.assert_allclose(rotation, pose[:3, :3], atol=1e-6)
+    with pytest.raises(ValueError, match="the measurement of the edge 5 → 6 is not an element"):
+        graph.add_edge(5, 6, 2.0 * pose, np.eye(6))
+    with pytest.raises(ValueError, match="the measurement of the prior on node 6 is not finite"):
+        graph.add_prior(6, np.full((4, 4), np.inf), np.eye(6))
+    with pytest.raises(ValueError, match="a pose graph holds one of SE2, SE3, Sim3, not 'se3'"):
+        PoseGraph("se3")
+
+
 def test_components_follow_every_edit():
     """``components`` is cached: each edit of nodes or edges must be seen."""
     graph = PoseGraph(SE2)
