@@ -45,6 +45,23 @@ EXAMPLES = {
 }
 
 
+def _at_least(minimum: float, kind: type = int):
+    """An argparse type: a number of ``kind`` no smaller than ``minimum``."""
+
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"not {'an integer' if kind is int else 'a number'}: {text!r}"
+            ) from None
+        if not value >= minimum:
+            raise argparse.ArgumentTypeError(f"must be ≥ {minimum}, not {text}")
+        return value
+
+    return parse
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="posegraph",
@@ -102,8 +119,8 @@ def _parser() -> argparse.ArgumentParser:
         default="loops",
         help="edges the kernel applies to (default: loops, i.e. not between consecutive nodes)",
     )
-    opt.add_argument("--max-iterations", type=int, default=100, help="default: 100")
-    opt.add_argument("--time-limit", type=float, help="seconds")
+    opt.add_argument("--max-iterations", type=_at_least(0), default=100, help="default: 100")
+    opt.add_argument("--time-limit", type=_at_least(0, float), help="seconds")
     opt.add_argument(
         "--fix", type=int, nargs="+", metavar="ID", default=[], help="hold these nodes"
     )
@@ -134,7 +151,7 @@ def _parser() -> argparse.ArgumentParser:
     ev.add_argument("estimate", help="g2o, TORO, TUM or KITTI")
     ev.add_argument("ground_truth", help="g2o, TORO, TUM or KITTI")
     ev.add_argument("--align", choices=["se3", "sim3", "none"], default="se3", help="default: se3")
-    ev.add_argument("--delta", type=int, default=1, help="RPE step in poses (default 1)")
+    ev.add_argument("--delta", type=_at_least(1), default=1, help="RPE step in poses (default 1)")
     ev.add_argument("--plot", metavar="FIG.png")
 
     drift = command(
@@ -168,10 +185,10 @@ def _parser() -> argparse.ArgumentParser:
     drift.add_argument("--overwrite", action="store_true", help="allow -o to be the input file")
 
     bench = command("bench", "time posegraph against gtsam on the benchmark graphs", [common])
-    bench.add_argument("--repeats", type=int, default=3, help="runs per round (default 3)")
+    bench.add_argument("--repeats", type=_at_least(1), default=3, help="runs per round (default 3)")
     bench.add_argument(
         "--rounds",
-        type=int,
+        type=_at_least(1),
         default=2,
         help="rounds in which gtsam and posegraph take turns; the best run counts (default 2)",
     )
@@ -193,7 +210,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.debug:
             traceback.print_exc()
         else:
-            report(f"internal error: {type(error).__name__}: {error} (rerun with --debug)")
+            first_line = (str(error).splitlines() or [""])[0][:300]
+            report(f"internal error: {type(error).__name__}: {first_line} (rerun with --debug)")
         return EXIT_INTERNAL
 
 

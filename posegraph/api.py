@@ -11,7 +11,7 @@ from .factors import between_squares, chi2
 from .gnc import gnc_tls
 from .graph import PoseGraph
 from .initialization import choose, initialize, odometry_mask, spanning_tree_values
-from .robust import Robustifier, RobustKernel, default_width
+from .robust import KERNELS, Robustifier, RobustKernel, default_width
 from .solvers import Callback, Result, SolverOptions
 from .solvers import optimize as solve
 
@@ -32,6 +32,26 @@ def robust_mask(graph: PoseGraph, edges: str) -> np.ndarray:
     if edges == "all":
         return np.ones(graph.num_edges, dtype=bool)
     raise ValueError(f"robust edges are {' or '.join(ROBUST_EDGE_CLASSES)}, not {edges!r}")
+
+
+def _robust_kernel(robust: str, dof: int) -> tuple[str, float]:
+    """(name, width) of a ``robust`` spec "NAME[:WIDTH]"."""
+    name, _, width_text = robust.partition(":")
+    name = name.strip().lower()
+    gnc = name in ("gnc", "tls")
+    if not gnc and name not in KERNELS:
+        raise ValueError(f"unknown robust kernel {name!r}; choose from gnc, {', '.join(KERNELS)}")
+    if not width_text:
+        return name, default_width(dof, GNC_QUANTILE if gnc else KERNEL_QUANTILE)
+    try:
+        width = float(width_text)
+    except ValueError:
+        raise ValueError(
+            f"a robust kernel's width is a number (as in {name}:2.5), not {width_text!r}"
+        ) from None
+    if not width > 0:
+        raise ValueError(f"a robust kernel's width must be positive, not {width_text}")
+    return name, width
 
 
 def optimize(
@@ -62,6 +82,9 @@ def optimize(
     """
     options = options or SolverOptions()
     start = time.perf_counter()
+    if robust is not None:  # checked before any work is done
+        kernel = _robust_kernel(robust, graph.group.dof)
+        mask = robust_mask(graph, robust_edges)
     input_error = (
         0.5 * chi2(graph.values, graph.edges, graph.priors) if graph.initialized.all() else None
     )
@@ -86,18 +109,13 @@ def optimize(
         result = solve(graph, options, callback, system=system, previous=previous)
         graph.last_result = (_structure_key(graph, options), result)
     else:
-        mask = robust_mask(graph, robust_edges)
-        name, _, width_text = robust.partition(":")
-        name = name.strip().lower()
-        gnc = name in ("gnc", "tls")
-        quantile = GNC_QUANTILE if gnc else KERNEL_QUANTILE
-        width = float(width_text) if width_text else default_width(graph.group.dof, quantile)
-        if gnc:
+        name, width = kernel
+        if name in ("gnc", "tls"):
             outcome = gnc_tls(graph, mask, width, options)
             result, rejected = outcome.result, outcome.rejected
         else:
-            kernel = RobustKernel(name, width)
-            result = solve(graph, options, callback, weighting=Robustifier(kernel, mask))
+            weighting = Robustifier(RobustKernel(name, width), mask)
+            result = solve(graph, options, callback, weighting=weighting)
             s = between_squares(result.values, graph.edges)
             rejected = np.flatnonzero(mask & (s > width**2))
         result.summary.robust = f"{name}:{width:.6g}"

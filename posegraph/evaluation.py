@@ -76,6 +76,11 @@ def evaluate(
     index_est, index_gt = associate(estimate, truth)
     if index_est.size < 3:
         raise ValueError(f"only {index_est.size} poses have keys in both trajectories; need ≥ 3")
+    if not 1 <= delta < index_est.size:
+        raise ValueError(
+            f"the RPE step is 1 to {index_est.size - 1} poses (of the {index_est.size} matched), "
+            f"not {delta}"
+        )
     est, gt = estimate.poses[index_est], truth.poses[index_gt]
     if alignment == "none":
         transform = Sim3.identity()
@@ -87,9 +92,8 @@ def evaluate(
         s * np.einsum("ij,nj->ni", transform.rotation, est.translation) + transform.translation,
     )
     ate = np.linalg.norm(gt.translation - aligned.translation, axis=1)
-    step = max(1, min(delta, index_est.size - 1))
-    relative_gt = gt[:-step].between(gt[step:])
-    relative_est = aligned[:-step].between(aligned[step:])
+    relative_gt = gt[:-delta].between(gt[delta:])
+    relative_est = aligned[:-delta].between(aligned[delta:])
     error = relative_gt.between(relative_est)
     rpe_t = np.linalg.norm(error.translation, axis=1)
     rpe_r = np.degrees(np.linalg.norm(error.log()[:, 3:], axis=1))

@@ -238,6 +238,39 @@ def test_eval_reports_ate_and_rpe(tmp_path):
     assert sim3["ate"]["rmse"] <= after["ate"]["rmse"] + 1e-12
     text = run("eval", optimised, truth_path).stdout
     assert "ATE" in text and "RPE" in text
+    too_far = run("eval", optimised, truth_path, "--delta", 160, check_exit=2)
+    assert "the RPE step is 1 to 159 poses (of the 160 matched), not 160" in too_far.stderr
+
+
+def test_numeric_arguments_are_checked_by_the_parser():
+    """Counts and limits out of range stop at parsing (exit 2), naming the argument."""
+    cases = [
+        (["optimize", EXAMPLE, "--max-iterations", "-3"], "--max-iterations: must be ≥ 0"),
+        (["optimize", EXAMPLE, "--time-limit", "-1"], "--time-limit: must be ≥ 0"),
+        (["optimize", EXAMPLE, "--max-iterations", "x"], "--max-iterations: not an integer"),
+        (["eval", EXAMPLE, EXAMPLE, "--delta", "0"], "--delta: must be ≥ 1"),
+        (["bench", "--repeats", "0"], "--repeats: must be ≥ 1"),
+        (["bench", "--rounds", "0"], "--rounds: must be ≥ 1"),
+        (["scale-drift", EXAMPLE, "--scale-information", "0"], "must be positive, not 0"),
+    ]
+    for args, message in cases:
+        failed = run(*args, check_exit=2)
+        assert message in failed.stderr and "Traceback" not in failed.stderr, args
+
+
+def test_an_internal_error_is_one_line(monkeypatch, capsys):
+    """A crash is reported as its first line only (a message can span pages, as gtsam's do)."""
+    from posegraph_cli import commands, main
+
+    def crash(args):
+        raise RuntimeError("first line\n" + "page of detail\n" * 100)
+
+    monkeypatch.setattr(commands, "info", crash)
+    assert main.main(["info", EXAMPLE]) == main.EXIT_INTERNAL
+    stderr = capsys.readouterr().err
+    assert stderr == (
+        "posegraph: error: internal error: RuntimeError: first line (rerun with --debug)\n"
+    )
 
 
 @pytest.mark.parametrize("name, content, line, words", MALFORMED, ids=[m[0] for m in MALFORMED])

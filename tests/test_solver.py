@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import posegraph
 from posegraph.factors import linearize_between, linearize_priors
 from posegraph.io import read_graph
 from posegraph.lie import SE2, SE3
@@ -159,3 +160,25 @@ def test_invalid_options_are_refused():
         SolverOptions(method="dogleg")
     with pytest.raises(ValueError, match="damping"):
         SolverOptions(damping="sometimes")
+    with pytest.raises(ValueError, match="max_iterations must be ≥ 0"):
+        SolverOptions(max_iterations=-1)
+    with pytest.raises(ValueError, match="time_limit must be ≥ 0 seconds, not -1"):
+        SolverOptions(time_limit=-1)
+
+
+def test_robust_options_are_checked_before_any_work():
+    """A bad kernel, width or edge class is refused before the values are initialised."""
+    graph = random_graph(SE2, 12, 6, seed=91, noise=0.05)
+    values = graph.values
+    cases = [
+        ({"robust": "xyz"}, "unknown robust kernel 'xyz'; choose from gnc, huber"),
+        ({"robust": "gnc:abc"}, r"width is a number \(as in gnc:2.5\), not 'abc'"),
+        ({"robust": "huber:0"}, "width must be positive, not 0"),
+        ({"robust": "cauchy", "robust_edges": "some"}, "robust edges are loops or all"),
+    ]
+    for keywords, message in cases:
+        with pytest.raises(ValueError, match=message):
+            posegraph.optimize(graph, init="odometry", **keywords)
+        assert graph.values is values  # untouched
+    result = posegraph.optimize(graph, robust="Cauchy:2", robust_edges="all")
+    assert result.summary.robust == "cauchy:2"

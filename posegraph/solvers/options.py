@@ -44,3 +44,5 @@ class SolverOptions:
             raise ValueError(f"damping is 'diagonal' or 'identity', not {self.damping!r}")
         if self.max_iterations < 0:
             raise ValueError("max_iterations must be ≥ 0")
+        if self.time_limit is not None and not self.time_limit >= 0:
+            raise ValueError(f"time_limit must be ≥ 0 seconds, not {self.time_limit}")
