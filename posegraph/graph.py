@@ -143,13 +143,14 @@ class PoseGraph:
         ≤ 0, or that is off the group by more than 1e-4 (relative to its linear block), is
         refused. A refusal is a ``ValueError`` naming ``describe(k)`` for the k-th."""
         group, n = self.group, self.group.matrix_size
-        if isinstance(values, LieGroup):
+        element = isinstance(values, LieGroup)
+        if element:
             if not isinstance(values, group):
                 raise TypeError(
                     f"values are {type(values).__name__}, the graph is {group.__name__}"
                 )
             values = values if values.batch_shape == (count,) else values.broadcast_to((count,))
-            given = None
+            given = values.as_matrix()
         else:
             given = np.asarray(values, float)
             if given.shape not in ((n, n), (count, n, n)):
@@ -158,15 +159,10 @@ class PoseGraph:
                     f"{group.__name__} matrices are {n} × {n}{stacked}, not of shape {given.shape}"
                 )
             given = np.broadcast_to(given, (count, n, n))
-        fields = (
-            [getattr(values, name) for name in group._event_ndims] if given is None else [given]
-        )
-        finite = np.ones(count, dtype=bool)
-        for field in fields:
-            finite &= np.isfinite(field.reshape(count, -1)).all(axis=1)
+        finite = np.isfinite(given).all(axis=(1, 2))
         if not finite.all():
             raise ValueError(f"{describe(int(np.flatnonzero(~finite)[0]))} is not finite")
-        if given is None:
+        if element:
             return values
         corner, linear = given[:, -1, -1], given[:, :-1, :-1]
         determinant = np.linalg.det(linear)
