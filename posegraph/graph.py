@@ -68,13 +68,12 @@ class PoseGraph:
 
     def __init__(self, group: type[LieGroup] | str) -> None:
         """``group``: SE2, SE3 or Sim3, the class or its name."""
-        by_name = {g.__name__: g for g in POSE_GROUPS}
-        if by_name.get(group, group) not in POSE_GROUPS:
-            names = ", ".join(by_name)
+        group = {g.__name__: g for g in POSE_GROUPS}.get(group, group)
+        if group not in POSE_GROUPS:
+            names = ", ".join(g.__name__ for g in POSE_GROUPS)
             raise ValueError(
                 f"a pose graph holds one of {names}, not {getattr(group, '__name__', repr(group))}"
             )
-        group = by_name.get(group, group)
         self.group = group
         self.node_ids = np.zeros(0, dtype=np.int64)
         self.values: LieGroup = group.identity((0,))
@@ -240,9 +239,9 @@ class PoseGraph:
             size = np.abs(information).max(axis=(1, 2))  # NaN or ∞ where an entry is
             asymmetry = np.abs(information - np.swapaxes(information, 1, 2)).max(axis=(1, 2))
         symmetric = np.isfinite(size) & (asymmetry <= 1e-9 * size)
-        smallest = np.full(count, -np.inf)
+        smallest = np.full(count, np.nan)  # fails every comparison where not symmetric
         smallest[symmetric] = np.linalg.eigvalsh(information[symmetric])[:, 0]
-        bad = np.flatnonzero(~symmetric | ~(smallest >= -1e-9 * size))
+        bad = np.flatnonzero(~(smallest >= -1e-9 * size))
         if bad.size:
             k = int(bad[0])
             if not np.isfinite(size[k]):
