@@ -13,6 +13,7 @@ import traceback
 
 import posegraph
 from posegraph.initialization import INITIALIZERS
+from posegraph.io.tags import EDGE2_ORDERS
 
 from . import commands
 from .errors import EXIT_BAD_INPUT, UsageError, report
@@ -83,6 +84,13 @@ def _parser() -> argparse.ArgumentParser:
         "--g2o-rotation-information",
         action="store_true",
         help="weigh SE3 rotation information as g2o does (Λ_φφ = Λ_qq/4)",
+    )
+    reading.add_argument(
+        "--edge2-order",
+        choices=list(EDGE2_ORDERS),
+        default="toro",
+        help="order of the information values on EDGE2 lines: toro (I11 I12 I22 I33 I13 I23, "
+        "default) or g2o (I11 I12 I13 I22 I23 I33, as gtsam's readG2o reads them)",
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 

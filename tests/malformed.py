@@ -100,5 +100,11 @@ MALFORMED = [
         3,
         "not positive definite",
     ),
+    (
+        "edge2-information-in-g2o-order",
+        "VERTEX2 0 0 0 0\nVERTEX2 1 1 0 0\nEDGE2 0 1 1 0 0 4 1 0.5 9 2 16\n",
+        3,
+        "read it with --edge2-order g2o",
+    ),
     ("not-text", b"\x89PNG\r\n\x1a\n\x00\xff\xfe", None, "is not a text file"),
 ]

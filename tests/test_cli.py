@@ -155,6 +155,14 @@ def test_optimize_options(tmp_path):
     assert unknown.stderr.count("\n") == 1 and "node 99999" in unknown.stderr
 
 
+def test_edge2_order_option(tmp_path):
+    """The file's values are 0.5 along x from the measurement, weighed by I11 = 4."""
+    path = tmp_path / "g2o_order.graph"
+    path.write_text("VERTEX2 0 0 0 0\nVERTEX2 1 1.5 0 0\nEDGE2 0 1 1 0 0 4 1 0.5 9 2 16\n")
+    document = run_json("optimize", path, "--edge2-order", "g2o")
+    assert document["summary"]["input_error"] == pytest.approx(0.5 * 0.5**2 * 4, rel=1e-12)
+
+
 def test_ctrl_c_stops_cleanly_and_writes_the_best_values(tmp_path, shared_dataset):
     """SIGINT during a long run: exit 1, the values so far written, no traceback."""
     source, out = shared_dataset("torus3D.g2o"), tmp_path / "partial.g2o"

@@ -154,6 +154,38 @@ def test_g2o_rotation_information_option(tmp_path):
     )
 
 
+EDGE2_INFORMATION = np.array([[4.0, 1.0, 0.5], [1.0, 9.0, 2.0], [0.5, 2.0, 16.0]])
+EDGE2_VALUES = {"toro": "4 1 9 16 0.5 2", "g2o": "4 1 0.5 9 2 16"}
+"""EDGE2_INFORMATION written in each order; neither text is positive definite in the other."""
+
+
+@pytest.mark.parametrize("order", ["toro", "g2o"])
+def test_edge2_information_in_either_order(order, tmp_path):
+    path = tmp_path / "e.graph"
+    path.write_text(f"VERTEX2 0 0 0 0\nVERTEX2 1 1 0 0\nEDGE2 0 1 1 0 0 {EDGE2_VALUES[order]}\n")
+    graph = read_graph(str(path), ReadOptions(edge2_order=order)).graph
+    np.testing.assert_array_equal(graph.edges.information[0], EDGE2_INFORMATION)
+    other = "g2o" if order == "toro" else "toro"
+    with pytest.raises(GraphFileError) as raised:
+        read_graph(str(path), ReadOptions(edge2_order=other))
+    message = str(raised.value)
+    assert message.startswith(f"{path}:3: EDGE2: information matrix is not positive definite")
+    assert f"read it with --edge2-order {order} (ReadOptions(edge2_order='{order}'))" in message
+
+
+def test_edge2_order_gives_no_advice_when_neither_order_is_positive_definite(tmp_path):
+    path = tmp_path / "e.graph"
+    path.write_text("VERTEX2 0 0 0 0\nVERTEX2 1 1 0 0\nEDGE2 0 1 1 0 0 1 0 1 0 0 0\n")
+    with pytest.raises(GraphFileError) as raised:
+        read_graph(str(path))
+    assert "--edge2-order" not in str(raised.value)
+
+
+def test_unknown_edge2_order_is_refused():
+    with pytest.raises(ValueError, match="edge2_order must be one of toro, g2o, not 'upper'"):
+        ReadOptions(edge2_order="upper")
+
+
 def test_nodes_without_vertices_follow_the_odometry_chain(tmp_path):
     """With no VERTEX lines, node k+1 = node k · Z(k → k+1), from the identity at the lowest id."""
     graph = random_graph(SE2, 12, 6, seed=37)

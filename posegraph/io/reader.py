@@ -13,7 +13,7 @@ from ..lie import SE3, Sim3
 from ..lifting import default_scale_information, lift_information, lift_se3
 from .errors import GraphFileError
 from .parsing import LineChecker, Rows, read_lines, to_rows
-from .tags import G2O_TAGS, TORO_TAGS, TagFormat
+from .tags import EDGE2_ORDERS, G2O_TAGS, TORO_TAGS, TagFormat, edge2_information, edge2_order_text
 
 ALL_TAGS: dict[str, TagFormat] = {**G2O_TAGS, **TORO_TAGS}
 
@@ -27,15 +27,25 @@ class ReadOptions:
             stopping at the first.
         g2o_rotation_information: read SE3 information the way g2o itself weighs it
             (Λ_φφ = Λ_qq/4, Λ_ρφ = Λ_ρq/2) instead of as-is over (ρ, φ) like gtsam.
+        edge2_order: the order of the six information values of TORO's EDGE2 lines: "toro"
+            (I11 I12 I22 I33 I13 I23, TORO's own) or "g2o" (the upper triangle, row-major, as
+            gtsam's ``readG2o`` reads them).
         scale_information: see below.
     """
 
     lenient: bool = False
     g2o_rotation_information: bool = False
+    edge2_order: str = "toro"
     scale_information: float | None = None
     """For files mixing SE3 and Sim3 lines (monocular odometry plus Sim3 loop closures): the SE3
     lines are lifted to Sim3 with scale 1 and this information on log-scale (None:
     ``posegraph.lifting.default_scale_information`` of the SE3 edges)."""
+
+    def __post_init__(self) -> None:
+        if self.edge2_order not in EDGE2_ORDERS:
+            raise ValueError(
+                f"edge2_order must be one of {', '.join(EDGE2_ORDERS)}, not {self.edge2_order!r}"
+            )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -93,15 +103,32 @@ def _lift_se3_records(collected: _Collected, scale_information: float | None) ->
         )
 
 
-def _check_information(rows: Rows, measurements, information, checker: LineChecker):
+def _edge2_order_advice(rows: Rows, order: str) -> str:
+    """Advice for EDGE2 lines that are not positive definite in ``order``: whether every one of
+    them is in the other order (files of both kinds exist)."""
+    other = next(name for name in EDGE2_ORDERS if name != order)
+    information = edge2_information(rows.numbers[:, 5:11], other)
+    if not (np.linalg.eigvalsh(information)[:, 0] > 0).all():
+        return ""
+    return (
+        f" in the {order} order ({edge2_order_text(order)}); every EDGE2 line of this file is"
+        f" positive definite in the {other} order ({edge2_order_text(other)}): read it with"
+        f" --edge2-order {other} (ReadOptions(edge2_order={other!r}))"
+    )
+
+
+def _check_information(rows: Rows, measurements, information, checker: LineChecker, options):
     smallest = np.linalg.eigvalsh(information)[:, 0]
     bad = ~(smallest > 0)
     if not bad.any():
         return rows, measurements, information
+    advice = _edge2_order_advice(rows, options.edge2_order) if rows.tag == "EDGE2" else ""
     kept = checker.keep_good(
         rows,
         bad,
-        lambda k: f"information matrix is not positive definite (λ_min = {smallest[k]:.3g})",
+        lambda k: (
+            f"information matrix is not positive definite (λ_min = {smallest[k]:.3g}){advice}"
+        ),
     )
     return kept, measurements[~bad], information[~bad]
 
@@ -124,7 +151,7 @@ def _convert(spec: TagFormat, rows: Rows, options: ReadOptions, checker, collect
             if not len(rows):
                 return
         measurements, information = spec.parse(rows.numbers, options)
-        converted = _check_information(rows, measurements, information, checker)
+        converted = _check_information(rows, measurements, information, checker, options)
         if len(converted[0]):
             (collected.edges if spec.kind == "edge" else collected.priors).append(converted)
     elif spec.kind == "fix":

@@ -9,7 +9,9 @@ Conventions (CONVENTIONS.md, "g2o and TORO files"):
   world → camera Sᵢ, so our Xᵢ = Sᵢ⁻¹; an edge measurement Z becomes ours as Z⁻¹.
   Dialect (a) writes the element (q, t, s); dialect (b) writes log(S⁻¹) = log(Xᵢ) (vertex,
   followed by fx fy cx cy) and log(Z⁻¹) (edge), in g2o's tangent order;
-* TORO's EDGE2 information order is I11 I12 I22 I33 I13 I23; VERTEX3/EDGE3 rotations are
+* TORO's EDGE2 information order is I11 I12 I22 I33 I13 I23 (some files, e.g. those gtsam's
+  ``readG2o`` reads, use g2o's upper triangle instead: ``ReadOptions.edge2_order``);
+  VERTEX3/EDGE3 rotations are
   roll, pitch, yaw with R = Rz(yaw) Ry(pitch) Rx(roll), information as-is over
   (x, y, z, roll, pitch, yaw), as gtsam's ``load3D`` reads it.
 """
@@ -27,7 +29,11 @@ from .parsing import symmetric_from_upper, upper_from_symmetric
 
 SIM3_G2O_ORDER = np.array([3, 4, 5, 0, 1, 2, 6])
 """g2o's Sim3 tangent (ω, υ, σ): its component k is our component SIM3_G2O_ORDER[k]."""
-TORO2_ORDER = [(0, 0), (0, 1), (1, 1), (2, 2), (0, 2), (1, 2)]
+EDGE2_ORDERS = {
+    "toro": [(0, 0), (0, 1), (1, 1), (2, 2), (0, 2), (1, 2)],
+    "g2o": [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)],
+}
+"""Entries (row, column) of the six information values of an EDGE2 line, by order name."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -80,15 +86,21 @@ def sim3_information_to_file(information: np.ndarray) -> np.ndarray:
     return upper_from_symmetric(information[:, SIM3_G2O_ORDER[:, None], SIM3_G2O_ORDER[None, :]])
 
 
-def toro2_information(values: np.ndarray) -> np.ndarray:
+def edge2_information(values: np.ndarray, order: str) -> np.ndarray:
+    """The (n, 3, 3) information of EDGE2 lines from their six values in ``order``."""
     out = np.zeros((values.shape[0], 3, 3))
-    for k, (r, c) in enumerate(TORO2_ORDER):
+    for k, (r, c) in enumerate(EDGE2_ORDERS[order]):
         out[:, r, c] = out[:, c, r] = values[:, k]
     return out
 
 
+def edge2_order_text(order: str) -> str:
+    """The order's entries as a file lists them, e.g. "I11 I12 I22 I33 I13 I23"."""
+    return " ".join(f"I{r + 1}{c + 1}" for r, c in EDGE2_ORDERS[order])
+
+
 def toro2_information_to_file(information: np.ndarray) -> np.ndarray:
-    return np.stack([information[:, r, c] for r, c in TORO2_ORDER], axis=1)
+    return np.stack([information[:, r, c] for r, c in EDGE2_ORDERS["toro"]], axis=1)
 
 
 # ------------------------------------------------------------------------- element parsing
@@ -205,7 +217,7 @@ TORO_TAGS: dict[str, TagFormat] = {
         SE2,
         (11,),
         (0, 1),
-        lambda n, o: (SE2.from_xytheta(n[:, 2:5]), toro2_information(n[:, 5:11])),
+        lambda n, o: (SE2.from_xytheta(n[:, 2:5]), edge2_information(n[:, 5:11], o.edge2_order)),
     ),
     "VERTEX3": TagFormat("vertex", SE3, (7,), (0,), lambda n, o: _rpy_pose(n, 1)),
     "EDGE3": TagFormat(

@@ -7,7 +7,7 @@ import pytest
 from posegraph_datasets.paths import BEST_KNOWN_ERROR
 
 from posegraph.factors import linearize_between, linearize_priors
-from posegraph.io import read_graph
+from posegraph.io import ReadOptions, read_graph
 from posegraph.lie import SE2, SE3, Sim3
 from posegraph.linear import NormalEquations
 from posegraph.solvers import optimize
@@ -124,6 +124,29 @@ def test_error_and_gradient_with_priors(group):
 def test_sim3_error_equals_gtsam():
     """gtsam's Sim3 between factor omits the Logmap Jacobian, so only the error is compared."""
     _assert_agrees_at_initial_values(random_graph(Sim3, 15, 10, seed=22, noise=0.3), False)
+
+
+@pytest.mark.parametrize(
+    "name, edge2_order, gtsam_reader",
+    [("w100.graph", "toro", "load2D"), ("w100_30.g2o", "g2o", "readG2o")],
+)
+def test_edge2_files_are_read_as_gtsam_reads_them(gtsam_dataset, name, edge2_order, gtsam_reader):
+    """Both information orders of EDGE2 lines, against gtsam's own reading of the same file:
+    the same error at the file's values, and an optimum that gtsam's graph scores the same and
+    that is gtsam's own or lower."""
+    path = str(gtsam_dataset(name))
+    if gtsam_reader == "load2D":
+        factors, values = gtsam.load2D(path)
+    else:
+        factors, values = gtsam.readG2o(path, False)
+    graph = read_graph(path, ReadOptions(edge2_order=edge2_order)).graph
+    assert factors.size() == graph.num_edges
+    assert _our_error_and_gradient(graph)[0] == pytest.approx(factors.error(values), rel=1e-9)
+    ours = optimize(graph)
+    _, our_optimum = bridge.graph_to_gtsam(graph, ours.values)
+    assert factors.error(our_optimum) == pytest.approx(ours.summary.final_error, rel=1e-9)
+    theirs = factors.error(gtsam.LevenbergMarquardtOptimizer(factors, values).optimize())
+    assert ours.summary.final_error <= theirs * (1 + 1e-6)
 
 
 def _gtsam_optimum(graph) -> float:
