@@ -24,6 +24,7 @@ def _options(args: argparse.Namespace) -> ReadOptions:
     return ReadOptions(
         lenient=args.lenient,
         g2o_rotation_information=args.g2o_rotation_information,
+        identity_information=args.identity_information,
         edge2_order=args.edge2_order,
         scale_information=getattr(args, "scale_information", None),
     )

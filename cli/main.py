@@ -86,6 +86,12 @@ def _parser() -> argparse.ArgumentParser:
         help="weigh SE3 rotation information as g2o does (Λ_φφ = Λ_qq/4)",
     )
     reading.add_argument(
+        "--identity-information",
+        action="store_true",
+        help="weigh every edge and prior by the identity, ignoring the file's information "
+        "(as TORO's -ic); lines may then omit it",
+    )
+    reading.add_argument(
         "--edge2-order",
         choices=list(EDGE2_ORDERS),
         default="toro",

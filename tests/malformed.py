@@ -106,5 +106,11 @@ MALFORMED = [
         3,
         "read it with --edge2-order g2o",
     ),
+    (
+        "edge-without-information",
+        "VERTEX3 0 0 0 0 0 0 0\nVERTEX3 1 1 0 0 0 0 0\nEDGE3 0 1 1 0 0 0 0 0\n",
+        3,
+        "the line has no information matrix (--identity-information",
+    ),
     ("not-text", b"\x89PNG\r\n\x1a\n\x00\xff\xfe", None, "is not a text file"),
 ]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import stat
 
@@ -184,6 +185,49 @@ def test_edge2_order_gives_no_advice_when_neither_order_is_positive_definite(tmp
 def test_unknown_edge2_order_is_refused():
     with pytest.raises(ValueError, match="edge2_order must be one of toro, g2o, not 'upper'"):
         ReadOptions(edge2_order="upper")
+
+
+INFORMATION_VALUES = {"EDGE_SE2": 6, "EDGE2": 6, "EDGE_SE3:QUAT": 21, "EDGE3": 21}
+INFORMATION_VALUES["EDGE_SIM3:EXPMAP"] = 28
+
+
+@pytest.mark.parametrize(
+    "group, suffix",
+    [(SE2, "g2o"), (SE3, "g2o"), (Sim3, "g2o"), (SE2, "graph"), (SE3, "graph")],
+    ids=lambda v: getattr(v, "__name__", v),
+)
+def test_identity_information_ignores_or_replaces_the_files(group, suffix, tmp_path):
+    """TORO's -ic: every edge weighs as the identity, and lines may omit their information."""
+    graph = random_graph(group, 8, 4, seed=38)
+    full = tmp_path / f"full.{suffix}"
+    write_graph(graph, str(full))
+    as_written = read_graph(str(full)).graph
+    identity = read_graph(str(full), ReadOptions(identity_information=True)).graph
+    eye = np.broadcast_to(np.eye(group.dof), graph.edges.information.shape)
+    np.testing.assert_array_equal(identity.edges.information, eye)
+    as_written.edges = dataclasses.replace(as_written.edges, information=eye.copy())
+    _assert_same_graph(identity, as_written)
+
+    lines = full.read_text().splitlines()
+    stripped_lines = [
+        " ".join(line.split()[: -INFORMATION_VALUES[line.split()[0]]])
+        if line.split()[0] in INFORMATION_VALUES
+        else line
+        for line in lines
+    ]
+    stripped = tmp_path / f"stripped.{suffix}"
+    stripped.write_text("\n".join(stripped_lines) + "\n")
+    _assert_same_graph(
+        read_graph(str(stripped), ReadOptions(identity_information=True)).graph, identity
+    )
+    with pytest.raises(GraphFileError) as raised:
+        read_graph(str(stripped))
+    first_edge = next(k for k, line in enumerate(lines, 1) if line.startswith("EDGE"))
+    assert str(raised.value).startswith(f"{stripped}:{first_edge}: ")
+    assert str(raised.value).endswith(
+        "the line has no information matrix (--identity-information weighs every edge by the"
+        " identity, as TORO's -ic does)"
+    )
 
 
 def test_nodes_without_vertices_follow_the_odometry_chain(tmp_path):

@@ -80,18 +80,29 @@ def to_rows(
     widths: tuple[int, ...],
     id_columns: tuple[int, ...],
     checker: LineChecker,
+    information_values: int = 0,
 ) -> Rows | None:
     """Convert the lines of one tag, checking token counts, numbers, finiteness and ids.
 
     ``widths`` are the accepted counts of numbers after the tag (several for dialects; an empty
-    tuple accepts any count ≥ 1, all ids). Returns None when no line survives.
+    tuple accepts any count ≥ 1, all ids); a line short of exactly ``information_values`` is
+    told that it lacks its information. Returns None when no line survives.
     """
+    without_information = {w - information_values for w in widths} if information_values else ()
     good: list[tuple[int, list[str]]] = []
     for number, tokens in entries:
         count = len(tokens) - 1
         if (widths and count not in widths) or (not widths and count < 1):
             expected = " or ".join(str(w) for w in widths) if widths else "at least 1"
-            checker.fail(number, f"{tag}: expected {expected} numbers after the tag, found {count}")
+            advice = (
+                ": the line has no information matrix (--identity-information weighs every edge"
+                " by the identity, as TORO's -ic does)"
+                if count in without_information
+                else ""
+            )
+            checker.fail(
+                number, f"{tag}: expected {expected} numbers after the tag, found {count}{advice}"
+            )
         else:
             good.append((number, tokens))
     rows_by_width: dict[int, list[tuple[int, list[str]]]] = {}

@@ -27,6 +27,9 @@ class ReadOptions:
             stopping at the first.
         g2o_rotation_information: read SE3 information the way g2o itself weighs it
             (Λ_φφ = Λ_qq/4, Λ_ρφ = Λ_ρq/2) instead of as-is over (ρ, φ) like gtsam.
+        identity_information: weigh every edge and prior by the identity, ignoring the file's
+            information (TORO's -ic, for files whose information is missing or not trusted);
+            lines may then omit their information values.
         edge2_order: the order of the six information values of TORO's EDGE2 lines: "toro"
             (I11 I12 I22 I33 I13 I23, TORO's own) or "g2o" (the upper triangle, row-major, as
             gtsam's ``readG2o`` reads them).
@@ -35,6 +38,7 @@ class ReadOptions:
 
     lenient: bool = False
     g2o_rotation_information: bool = False
+    identity_information: bool = False
     edge2_order: str = "toro"
     scale_information: float | None = None
     """For files mixing SE3 and Sim3 lines (monocular odometry plus Sim3 loop closures): the SE3
@@ -133,6 +137,17 @@ def _check_information(rows: Rows, measurements, information, checker: LineCheck
     return kept, measurements[~bad], information[~bad]
 
 
+def _pad_missing_information(entries: list, spec: TagFormat) -> list:
+    """Lines that omit their information get zeros in its place (for identity_information, which
+    replaces every information after parsing)."""
+    missing = spec.information_values
+    short = {w - missing for w in spec.widths} if missing else set()
+    return [
+        (number, tokens + ["0"] * missing if len(tokens) - 1 in short else tokens)
+        for number, tokens in entries
+    ]
+
+
 def _convert(spec: TagFormat, rows: Rows, options: ReadOptions, checker, collected):
     columns = spec.quaternion.get(rows.numbers.shape[1])
     if columns is not None:
@@ -151,6 +166,8 @@ def _convert(spec: TagFormat, rows: Rows, options: ReadOptions, checker, collect
             if not len(rows):
                 return
         measurements, information = spec.parse(rows.numbers, options)
+        if options.identity_information:
+            information = np.broadcast_to(np.eye(spec.group.dof), information.shape).copy()
         converted = _check_information(rows, measurements, information, checker, options)
         if len(converted[0]):
             (collected.edges if spec.kind == "edge" else collected.priors).append(converted)
@@ -204,7 +221,9 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
     collected = _Collected()
     for tag, entries in lines_by_tag.items():
         spec = ALL_TAGS[tag]
-        rows = to_rows(tag, entries, spec.widths, spec.id_columns, checker)
+        if options.identity_information:
+            entries = _pad_missing_information(entries, spec)
+        rows = to_rows(tag, entries, spec.widths, spec.id_columns, checker, spec.information_values)
         if rows is not None:
             _convert(spec, rows, options, checker, collected)
 

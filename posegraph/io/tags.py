@@ -53,6 +53,13 @@ class TagFormat:
     parse: Callable | None = None
     quaternion: dict[int, slice] = dataclasses.field(default_factory=dict)
 
+    @property
+    def information_values(self) -> int:
+        """How many numbers at the end of an edge or prior line are its information."""
+        if self.kind not in ("edge", "prior"):
+            return 0
+        return self.group.dof * (self.group.dof + 1) // 2
+
 
 # ------------------------------------------------------------------- information transforms
 def _g2o_faithful_scaling() -> np.ndarray:
