@@ -191,7 +191,8 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
     for number, tokens in read_lines(path):
         tag = tokens[0]
         if tag not in ALL_TAGS:
-            checker.fail(number, f"unknown tag {tag!r}")
+            advice = "" if options.lenient else " (--lenient skips lines it cannot read)"
+            checker.fail(number, f"unknown tag {tag!r}{advice}")
             continue
         lines_by_tag.setdefault(tag, []).append((number, tokens))
     if not lines_by_tag:
