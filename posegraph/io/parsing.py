@@ -88,7 +88,7 @@ def to_rows(
     tuple accepts any count ≥ 1, all ids); a line short of exactly ``information_values`` is
     told that it lacks its information. Returns None when no line survives.
     """
-    without_information = {w - information_values for w in widths} if information_values else ()
+    without_information = {w - information_values for w in widths} if information_values else set()
     good: list[tuple[int, list[str]]] = []
     for number, tokens in entries:
         count = len(tokens) - 1

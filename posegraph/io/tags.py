@@ -11,9 +11,8 @@ Conventions (CONVENTIONS.md, "g2o and TORO files"):
   followed by fx fy cx cy) and log(Z⁻¹) (edge), in g2o's tangent order;
 * TORO's EDGE2 information order is I11 I12 I22 I33 I13 I23 (some files, e.g. those gtsam's
   ``readG2o`` reads, use g2o's upper triangle instead: ``ReadOptions.edge2_order``);
-  VERTEX3/EDGE3 rotations are
-  roll, pitch, yaw with R = Rz(yaw) Ry(pitch) Rx(roll), information as-is over
-  (x, y, z, roll, pitch, yaw), as gtsam's ``load3D`` reads it.
+  VERTEX3/EDGE3 rotations are roll, pitch, yaw with R = Rz(yaw) Ry(pitch) Rx(roll), information
+  as-is over (x, y, z, roll, pitch, yaw), as gtsam's ``load3D`` reads it.
 """
 
 from __future__ import annotations
