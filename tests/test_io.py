@@ -230,6 +230,20 @@ def test_identity_information_ignores_or_replaces_the_files(group, suffix, tmp_p
     )
 
 
+def test_byte_order_mark_line_endings_and_comments(tmp_path):
+    """A UTF-8 byte-order mark, CRLF line ends, tabs, and # comments (whole-line or after a
+    line's numbers) read as the plain file does."""
+    graph = random_graph(SE2, 6, 2, seed=40)
+    plain = tmp_path / "plain.g2o"
+    write_graph(graph, str(plain))
+    lines = plain.read_text().splitlines()
+    decorated_lines = ["# exported by a tool", lines[0].replace(" ", "\t")]
+    decorated_lines += [f"{line}  # note {k}" for k, line in enumerate(lines[1:])]
+    decorated = tmp_path / "decorated.g2o"
+    decorated.write_bytes(b"\xef\xbb\xbf" + "\r\n".join(decorated_lines).encode() + b"\r\n")
+    _assert_same_graph(read_graph(str(decorated)).graph, read_graph(str(plain)).graph)
+
+
 def test_nodes_without_vertices_follow_the_odometry_chain(tmp_path):
     """With no VERTEX lines, node k+1 = node k · Z(k → k+1), from the identity at the lowest id."""
     graph = random_graph(SE2, 12, 6, seed=37)

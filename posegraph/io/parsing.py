@@ -55,9 +55,11 @@ class LineChecker:
 
 
 def read_lines(path: str) -> list[tuple[int, list[str]]]:
-    """(line number, tokens) of every line that is not blank or a ``#`` comment."""
+    """(line number, tokens) of every line that is not blank or a comment: ``#`` starts a
+    comment, at the start of a line or after its numbers. UTF-8, with or without a byte-order
+    mark."""
     try:
-        text = Path(path).read_text()
+        text = Path(path).read_text(encoding="utf-8-sig")
     except FileNotFoundError:
         raise GraphFileError(path, None, "no such file") from None
     except IsADirectoryError:
@@ -68,8 +70,10 @@ def read_lines(path: str) -> list[tuple[int, list[str]]]:
         raise GraphFileError(path, None, f"cannot be read ({error.strerror})") from None
     lines = []
     for number, line in enumerate(text.splitlines(), start=1):
+        if "#" in line:
+            line = line[: line.index("#")]
         tokens = line.split()
-        if tokens and not tokens[0].startswith("#"):
+        if tokens:
             lines.append((number, tokens))
     return lines
 
