@@ -8,6 +8,7 @@ the traceback instead.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import traceback
 
@@ -16,7 +17,7 @@ from posegraph.initialization import INITIALIZERS
 from posegraph.io.tags import EDGE2_ORDERS
 
 from . import commands
-from .errors import EXIT_BAD_INPUT, UsageError, report
+from .errors import EXIT_BAD_INPUT, EXIT_NOT_CONVERGED, UsageError, report
 
 EXIT_INTERNAL = 3
 
@@ -215,6 +216,9 @@ def main(argv: list[str] | None = None) -> int:
     handler = getattr(commands, args.command.replace("-", "_"))
     try:
         return handler(args)
+    except BrokenPipeError:  # the reader of stdout went away (`posegraph info g.g2o | head`)
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no error at exit
+        return EXIT_NOT_CONVERGED
     except (posegraph.GraphFileError, UsageError, ValueError, OSError) as error:
         if args.debug:
             traceback.print_exc()

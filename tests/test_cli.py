@@ -155,6 +155,21 @@ def test_optimize_options(tmp_path):
     assert unknown.stderr.count("\n") == 1 and "node 99999" in unknown.stderr
 
 
+def test_a_closed_output_pipe_ends_quietly():
+    """`posegraph info g.g2o | head -1`: no error line, no traceback, exit 1 (interrupted)."""
+    read_end, write_end = os.pipe()
+    os.close(read_end)
+    completed = subprocess.run(
+        [*COMMAND, "info", EXAMPLE],
+        stdout=write_end,
+        stderr=subprocess.PIPE,
+        text=True,
+        timeout=120,
+    )
+    os.close(write_end)
+    assert (completed.returncode, completed.stderr) == (1, "")
+
+
 def test_edge2_order_option(tmp_path):
     """The file's values are 0.5 along x from the measurement, weighed by I11 = 4."""
     path = tmp_path / "g2o_order.graph"

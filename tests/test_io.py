@@ -244,6 +244,25 @@ def test_byte_order_mark_line_endings_and_comments(tmp_path):
     _assert_same_graph(read_graph(str(decorated)).graph, read_graph(str(plain)).graph)
 
 
+def test_64_bit_node_ids_are_read_exactly(tmp_path):
+    """Ids beyond 2⁵³ (gtsam's symbol keys: 'x' << 56 | index) differ in their last digits,
+    which floats cannot hold."""
+    keys = [(ord("x") << 56) + k for k in range(3)] + [2**63 - 1]
+    path = tmp_path / "keys.g2o"
+    path.write_text(
+        "".join(f"VERTEX_SE2 {key} {k} 0 0\n" for k, key in enumerate(keys))
+        + "".join(
+            f"EDGE_SE2 {a} {b} 1 0 0 1 0 0 1 0 1\n"
+            for a, b in zip(keys[:-1], keys[1:], strict=True)
+        )
+    )
+    graph = read_graph(str(path)).graph
+    assert graph.node_ids.tolist() == keys
+    assert graph.node_ids[graph.edges.i].tolist() == keys[:-1]
+    assert graph.node_ids[graph.edges.j].tolist() == keys[1:]
+    np.testing.assert_array_equal(graph.values.as_matrix()[:, 0, 2], np.arange(4.0))
+
+
 def test_nodes_without_vertices_follow_the_odometry_chain(tmp_path):
     """With no VERTEX lines, node k+1 = node k · Z(k → k+1), from the identity at the lowest id."""
     graph = random_graph(SE2, 12, 6, seed=37)

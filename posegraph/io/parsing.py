@@ -23,15 +23,17 @@ class Rows:
     tag: str
     line_numbers: np.ndarray
     numbers: np.ndarray
+    node_ids: np.ndarray
+    """(n, k) int64: the tag's id columns, which lead its numbers, read exactly."""
 
     def __len__(self) -> int:
         return int(self.line_numbers.size)
 
     def subset(self, keep: np.ndarray) -> Rows:
-        return Rows(self.tag, self.line_numbers[keep], self.numbers[keep])
+        return Rows(self.tag, self.line_numbers[keep], self.numbers[keep], self.node_ids[keep])
 
     def ids(self, column: int) -> np.ndarray:
-        return self.numbers[:, column].astype(np.int64)
+        return self.node_ids[:, column]
 
 
 class LineChecker:
@@ -124,27 +126,44 @@ def to_rows(
         entries_1d = [(number, [tag, token]) for number, token in flat]
         return to_rows(tag, entries_1d, (1,), (0,), checker)
     line_numbers = np.array([number for number, _ in good])
+    parsed = np.ones(len(good), dtype=bool)
     try:
         numbers = np.array([tokens[1:] for _, tokens in good], dtype=float)
     except ValueError:
         numbers = np.full((len(good), len(good[0][1]) - 1), np.nan)
-        keep = np.ones(len(good), dtype=bool)
         for k, (number, tokens) in enumerate(good):
             try:
                 numbers[k] = np.array(tokens[1:], dtype=float)
             except ValueError:
                 bad = next(t for t in tokens[1:] if not _is_number(t))
                 checker.fail(number, f"{tag}: {bad!r} is not a number")
-                keep[k] = False
-        line_numbers, numbers = line_numbers[keep], numbers[keep]
-    rows = Rows(tag, line_numbers, numbers)
+                parsed[k] = False
+    ids = numbers[:, : len(id_columns)]
+    rows = Rows(tag, line_numbers, numbers, _node_ids(good, ids)).subset(parsed)
     non_finite = ~np.isfinite(rows.numbers).all(axis=1)
     rows = checker.keep_good(rows, non_finite, lambda k: "NaN or infinite value")
     if id_columns:
-        ids = rows.numbers[:, list(id_columns)]
-        not_integer = (ids != np.round(ids)).any(axis=1) | (ids < 0).any(axis=1)
-        rows = checker.keep_good(rows, not_integer, lambda k: "node ids must be whole numbers ≥ 0")
+        ids = rows.numbers[:, : len(id_columns)]
+        not_integer = (ids != np.round(ids)).any(axis=1) | (rows.node_ids < 0).any(axis=1)
+        rows = checker.keep_good(
+            rows, not_integer, lambda k: "node ids must be whole numbers from 0 to 2⁶³ − 1"
+        )
     return rows if len(rows) else None
+
+
+def _node_ids(entries: list[tuple[int, list[str]]], ids: np.ndarray) -> np.ndarray:
+    """The id columns as int64. Floats are exact below 2⁵³; beyond (64-bit keys such as gtsam's
+    symbols) the tokens are parsed as integers, so that nearby ids stay apart. Ids that are not
+    whole numbers come out as -1, for the caller's check to refuse."""
+    if not (np.abs(ids) >= 2.0**53).any():
+        return np.nan_to_num(ids, nan=-1.0, posinf=-1.0, neginf=-1.0).astype(np.int64)
+    exact = np.empty(ids.shape, dtype=np.int64)
+    for k, (_, tokens) in enumerate(entries):
+        try:
+            exact[k] = [int(token) for token in tokens[1 : 1 + ids.shape[1]]]
+        except (ValueError, OverflowError):
+            exact[k] = -1
+    return exact
 
 
 def _is_number(token: str) -> bool:
