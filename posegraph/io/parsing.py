@@ -152,9 +152,10 @@ def to_rows(
 
 
 def _node_ids(entries: list[tuple[int, list[str]]], ids: np.ndarray) -> np.ndarray:
-    """The id columns as int64. Floats are exact below 2⁵³; beyond (64-bit keys such as gtsam's
-    symbols) the tokens are parsed as integers, so that nearby ids stay apart. Ids that are not
-    whole numbers come out as -1, for the caller's check to refuse."""
+    """The id columns as int64. Floats are exact below 2⁵³; when a file has larger ids (64-bit
+    keys such as gtsam's symbols), its id tokens are parsed as integers instead, so that nearby
+    ids stay apart, and a token that is not an integer within int64 becomes -1. Non-finite ids
+    become -1 too; the caller refuses negative and fractional ids."""
     if not (np.abs(ids) >= 2.0**53).any():
         return np.nan_to_num(ids, nan=-1.0, posinf=-1.0, neginf=-1.0).astype(np.int64)
     exact = np.empty(ids.shape, dtype=np.int64)
