@@ -16,6 +16,8 @@ from .solvers import Callback, Result, SolverOptions
 from .solvers import optimize as solve
 
 ROBUST_EDGE_CLASSES = ("loops", "all")
+GNC_NAMES = ("gnc", "tls")
+"""Names of graduated non-convexity with the truncated-least-squares kernel in a robust spec."""
 LOCAL_RELATIVE_DECREASE = 1e-4
 """Tolerance of the warm start's refinement of new nodes (the full solve follows)."""
 GNC_QUANTILE = 0.999
@@ -38,7 +40,7 @@ def _robust_kernel(robust: str, dof: int) -> tuple[str, float]:
     """(name, width) of a ``robust`` spec "NAME[:WIDTH]"."""
     name, _, width_text = robust.partition(":")
     name = name.strip().lower()
-    gnc = name in ("gnc", "tls")
+    gnc = name in GNC_NAMES
     if not gnc and name not in KERNELS:
         raise ValueError(f"unknown robust kernel {name!r}; choose from gnc, {', '.join(KERNELS)}")
     if not width_text:
@@ -110,7 +112,7 @@ def optimize(
         graph.last_result = (_structure_key(graph, options), result)
     else:
         name, width = kernel
-        if name in ("gnc", "tls"):
+        if name in GNC_NAMES:
             outcome = gnc_tls(graph, mask, width, options)
             result, rejected = outcome.result, outcome.rejected
         else:

@@ -5,9 +5,9 @@ Both start from the same values (the file's, or odometry where it has no vertice
 graph; gtsam holds the gauge node with a σ = 1e-6 prior. The three timings of a graph take
 turns, ``repeats`` runs each, for ``rounds`` rounds, so that a slow spell of the machine does not
 fall on one of them alone. Prints a markdown table: time in milliseconds (best of all runs),
-iterations, final error ½ Σ rᵀΩr, the time ratio
-posegraph/gtsam, and posegraph's time per phase; then posegraph with its defaults
-(``init="auto"``), initialisation included, against the same gtsam run from the file's values.
+iterations, final error ½ Σ rᵀΩr, the time ratio posegraph/gtsam, and posegraph's time per
+phase; then posegraph with its defaults (``init="auto"``), initialisation included, against the
+same gtsam run from the file's values.
 """
 
 from __future__ import annotations
