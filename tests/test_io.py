@@ -58,6 +58,20 @@ def test_g2o_round_trip_is_exact_to_printed_precision(group, tmp_path):
         assert (tmp_path / "a.g2o").read_text() == (tmp_path / "b.g2o").read_text()
 
 
+def test_se2_numbers_are_written_back_as_read(tmp_path):
+    text = (
+        "VERTEX_SE2 0 0.5 -2.25 -0.00818381\n"
+        "VERTEX_SE2 1 1.5 0.2 1e-10\n"
+        "EDGE_SE2 0 1 1.0 2.47 -3.1 100.0 0.0 0.0 100.0 0.0 400.0\n"
+    )
+    source, written = tmp_path / "a.g2o", tmp_path / "b.g2o"
+    source.write_text(text)
+    write_graph(read_graph(str(source)).graph, str(written))
+    assert [float(x) for x in written.read_text().split() if x[0] in "-.0123456789"] == [
+        float(x) for x in text.split() if x[0] in "-.0123456789"
+    ]
+
+
 @pytest.mark.parametrize("dialect", ["a", "b"])
 def test_sim3_round_trip_in_both_dialects(dialect, tmp_path):
     graph = random_graph(Sim3, 9, 5, seed=32)

@@ -124,6 +124,12 @@ def test_angles_wrap():
     )
 
 
+def test_angles_in_range_are_kept_bit_for_bit():
+    angles = np.array([1e-10, -0.00818381, 3.0, -3.0, np.pi, np.nextafter(-np.pi, 0.0)])
+    assert np.array_equal(SO2(angles).normalize().angle, angles)
+    assert np.array_equal(SE2.from_xytheta(np.c_[angles, angles, angles]).angle, angles)
+
+
 def test_normalize_projects_drifted_rotations():
     rng = np.random.default_rng(6)
     x = SE3.sample(rng, (20,))

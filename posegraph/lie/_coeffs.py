@@ -228,6 +228,10 @@ def vee3(m: np.ndarray) -> np.ndarray:
 
 
 def wrap_angle(theta: np.ndarray) -> np.ndarray:
-    """Wrap angles to (−π, π]."""
-    wrapped = np.remainder(np.asarray(theta, dtype=float) + np.pi, 2.0 * np.pi) - np.pi
-    return np.where(wrapped == -np.pi, np.pi, wrapped)
+    """Wrap angles to (−π, π]. Angles already there are returned bit for bit: the shift by π
+    would round them (1e-10 + π − π = 1.00000008e-10), and a file's angles would be written
+    back with other digits."""
+    theta = np.asarray(theta, dtype=float)
+    wrapped = np.remainder(theta + np.pi, 2.0 * np.pi) - np.pi
+    wrapped = np.where(wrapped == -np.pi, np.pi, wrapped)
+    return np.where((theta > -np.pi) & (theta <= np.pi), theta, wrapped)
