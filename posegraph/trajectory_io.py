@@ -13,6 +13,7 @@ import numpy as np
 from .io.atomic import atomic_write_text
 from .io.errors import GraphFileError
 from .io.parsing import read_lines
+from .io.writer import number_fields
 from .lie import SE2, SE3, LieGroup, Sim3
 
 
@@ -44,15 +45,19 @@ def as_se3(values: LieGroup) -> SE3:
     raise TypeError(f"no SE3 trajectory for {type(values).__name__}")
 
 
+def _text(rows: np.ndarray) -> str:
+    return "".join(" ".join(fields) + "\n" for fields in number_fields(rows))
+
+
 def format_tum(trajectory: Trajectory) -> str:
     q, t = trajectory.poses.as_quaternion_translation()
     rows = np.concatenate([trajectory.keys[:, None].astype(float), t, q], axis=1)
-    return "".join(" ".join(repr(x) for x in row) + "\n" for row in rows.tolist())
+    return _text(rows)
 
 
 def format_kitti(trajectory: Trajectory) -> str:
     rows = trajectory.poses.as_matrix()[:, :3, :].reshape(-1, 12)
-    return "".join(" ".join(repr(x) for x in row) + "\n" for row in rows.tolist())
+    return _text(rows)
 
 
 def write_trajectory(trajectory: Trajectory, path: str, file_format: str) -> None:

@@ -13,6 +13,7 @@ from posegraph.graph import PoseGraph
 from posegraph.io import GraphFileError, ReadOptions, read_graph, write_graph
 from posegraph.lie import SE2, SE3, Sim3
 from posegraph.solvers import optimize
+from posegraph.trajectory_io import Trajectory, as_se3, write_trajectory
 
 from .conftest import random_graph
 
@@ -70,6 +71,16 @@ def test_se2_numbers_are_written_back_as_read(tmp_path):
     assert [float(x) for x in written.read_text().split() if x[0] in "-.0123456789"] == [
         float(x) for x in text.split() if x[0] in "-.0123456789"
     ]
+
+
+def test_negative_zero_is_written_as_zero(tmp_path):
+    source, written, tum = tmp_path / "a.g2o", tmp_path / "b.g2o", tmp_path / "b.tum"
+    source.write_text("VERTEX_SE2 0 -0.0 0.0 -0.0\nVERTEX_SE2 1 1.0 -0.0 0.0\n")
+    graph = read_graph(str(source)).graph
+    write_graph(graph, str(written))
+    write_trajectory(Trajectory(graph.node_ids, as_se3(graph.values)), str(tum), "tum")
+    for path in (written, tum):
+        assert "-0.0" not in path.read_text().split()
 
 
 @pytest.mark.parametrize("dialect", ["a", "b"])

@@ -21,15 +21,18 @@ from .tags import (
 TORO_SUFFIXES = (".graph", ".toro")
 
 
+def number_fields(numbers: np.ndarray) -> list[list[str]]:
+    """The text of each row's numbers: repr, which round-trips exactly, with −0.0 as 0.0."""
+    return [[repr(x) for x in row] for row in (np.asarray(numbers, float) + 0.0).tolist()]
+
+
 def _lines(tag: str, ids: list[np.ndarray], numbers: np.ndarray) -> list[str]:
-    """``TAG id… number…`` lines; floats printed with repr, which round-trips exactly."""
+    """``TAG id… number…`` lines."""
     id_columns = [np.asarray(c).tolist() for c in ids]
-    rows = numbers.tolist()
-    out = []
-    for k, row in enumerate(rows):
-        fields = [tag] + [str(c[k]) for c in id_columns] + [repr(x) for x in row]
-        out.append(" ".join(fields))
-    return out
+    return [
+        " ".join([tag] + [str(c[k]) for c in id_columns] + fields)
+        for k, fields in enumerate(number_fields(numbers))
+    ]
 
 
 def _pose_numbers(values, g2o_quaternion: bool) -> np.ndarray:
