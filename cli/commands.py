@@ -163,7 +163,7 @@ def eval(args: argparse.Namespace) -> int:  # noqa: A001 - the subcommand's name
     _check_output(args.plot, figure=True)
     estimate = load_trajectory(args.estimate, _options(args))
     truth = load_trajectory(args.ground_truth, _options(args))
-    evaluation = evaluate(estimate, truth, args.align, args.delta)
+    evaluation = evaluate(estimate, truth, args.align, args.delta, args.max_time_difference)
     if args.plot:
         from posegraph.plotting import plot_trajectories
 

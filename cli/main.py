@@ -13,6 +13,7 @@ import sys
 import traceback
 
 import posegraph
+from posegraph.evaluation import MAX_KEY_DIFFERENCE
 from posegraph.initialization import INITIALIZERS
 from posegraph.io.tags import EDGE2_ORDERS
 
@@ -38,7 +39,8 @@ EXAMPLES = {
   posegraph plot garage.g2o -o top.png --view top""",
     "eval": """examples:
   posegraph eval optimised.g2o groundtruth.tum
-  posegraph eval estimate.tum groundtruth.tum --align sim3 --plot ate.png --json""",
+  posegraph eval estimate.tum groundtruth.tum --align sim3 --plot ate.png --json
+  posegraph eval KeyFrameTrajectory.txt groundtruth.txt --align sim3 --max-time-difference 0.01""",
     "scale-drift": """examples:
   posegraph scale-drift monocular.g2o -o corrected.tum --gt groundtruth.tum --plot drift.png
   posegraph scale-drift monocular.g2o -o corrected.g2o --convention camera_from_world --json""",
@@ -167,6 +169,14 @@ def _parser() -> argparse.ArgumentParser:
     ev.add_argument("ground_truth", help="g2o, TORO, TUM or KITTI")
     ev.add_argument("--align", choices=["se3", "sim3", "none"], default="se3", help="default: se3")
     ev.add_argument("--delta", type=_at_least(1), default=1, help="RPE step in poses (default 1)")
+    ev.add_argument(
+        "--max-time-difference",
+        type=_at_least(0, float),
+        default=MAX_KEY_DIFFERENCE,
+        metavar="SECONDS",
+        help=f"pair poses whose time stamps differ by at most this (default {MAX_KEY_DIFFERENCE}, "
+        "as the TUM benchmark's associate.py); node ids and KITTI lines pair when equal",
+    )
     ev.add_argument("--plot", metavar="FIG.png")
 
     drift = command(

@@ -80,7 +80,8 @@ def format_evaluation(e: Evaluation) -> str:
 
     return "\n".join(
         [
-            f"matched {e.matched} poses; alignment {e.alignment} (scale {float(e.alignment_transform.scale):.6g})",
+            f"matched {e.matched} of {e.estimate_poses} poses (keys within {e.max_difference:g}); "
+            f"alignment {e.alignment} (scale {float(e.alignment_transform.scale):.6g})",
             row("ATE", e.ate, ""),
             row("RPE translation", e.rpe_translation, ""),
             row("RPE rotation", e.rpe_rotation_deg, "°"),

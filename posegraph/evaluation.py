@@ -5,6 +5,9 @@ benchmark; Zhang & Scaramuzza 2018, "A Tutorial on Quantitative Trajectory Evalu
   truth with the least-squares SE3 or Sim3 (Umeyama) S, or with no alignment.
 * RPE over ``delta`` steps: E_k = (G_k⁻¹ G_{k+δ})⁻¹ (P_k⁻¹ P_{k+δ}); its translation norm and
   rotation angle. RPE needs no alignment (for Sim3 alignment the estimate is rescaled first).
+* Poses are paired by key: a TUM file's time stamps, a graph's node ids, a KITTI file's line
+  numbers. Time stamps of two sensors rarely agree, so a pair may differ by up to
+  ``max_difference`` (``MAX_KEY_DIFFERENCE``, as the benchmark's ``associate.py``).
 """
 
 from __future__ import annotations
@@ -16,6 +19,10 @@ import numpy as np
 from .alignment import umeyama
 from .lie import SE3, Sim3
 from .trajectory_io import Trajectory
+
+MAX_KEY_DIFFERENCE = 0.02
+"""Largest key difference of a pair: 0.02 s of time stamps, the TUM RGB-D benchmark's default.
+Integer keys (node ids, KITTI lines) then pair only when equal."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -48,6 +55,8 @@ class Evaluation:
     rpe_translation: ErrorStatistics
     rpe_rotation_deg: ErrorStatistics
     matched: int
+    estimate_poses: int
+    max_difference: float
     aligned_estimate: SE3
 
     def as_dict(self) -> dict:
@@ -55,27 +64,59 @@ class Evaluation:
             "alignment": self.alignment,
             "scale": float(self.alignment_transform.scale),
             "matched_poses": self.matched,
+            "estimate_poses": self.estimate_poses,
+            "max_time_difference": self.max_difference,
             "ate": dataclasses.asdict(self.ate),
             "rpe_translation": dataclasses.asdict(self.rpe_translation),
             "rpe_rotation_deg": dataclasses.asdict(self.rpe_rotation_deg),
         }
 
 
-def associate(estimate: Trajectory, truth: Trajectory) -> tuple[np.ndarray, np.ndarray]:
-    """Indices of poses with equal keys in both trajectories (keys match exactly, e.g. ids)."""
-    common, index_est, index_gt = np.intersect1d(estimate.keys, truth.keys, return_indices=True)
-    return index_est, index_gt
+def associate(
+    estimate: Trajectory, truth: Trajectory, max_difference: float = MAX_KEY_DIFFERENCE
+) -> tuple[np.ndarray, np.ndarray]:
+    """Indices (into the estimate, into the truth) of the pairs, in the order of the estimate's
+    keys. Each estimate pose pairs with the ground-truth pose of the nearest key, if they differ
+    by at most ``max_difference``; a ground-truth pose claimed by several keeps the nearest."""
+    order = np.argsort(truth.keys, kind="stable")
+    keys = truth.keys[order]
+    after = np.searchsorted(keys, estimate.keys).clip(max=len(keys) - 1)
+    before = (after - 1).clip(min=0)
+    before_gap, after_gap = (np.abs(keys[k] - estimate.keys) for k in (before, after))
+    nearest = np.where(after_gap < before_gap, after, before)
+    gap = np.minimum(before_gap, after_gap)
+    near = np.flatnonzero(gap <= max_difference)
+    near = near[np.argsort(gap[near], kind="stable")]
+    claimed = near[np.unique(nearest[near], return_index=True)[1]]
+    index_est = claimed[np.argsort(estimate.keys[claimed], kind="stable")]
+    return index_est, order[nearest[index_est]]
+
+
+def _key_range(keys: np.ndarray) -> str:
+    return f"{keys.min():.15g} to {keys.max():.15g}"
 
 
 def evaluate(
-    estimate: Trajectory, truth: Trajectory, alignment: str = "se3", delta: int = 1
+    estimate: Trajectory,
+    truth: Trajectory,
+    alignment: str = "se3",
+    delta: int = 1,
+    max_difference: float = MAX_KEY_DIFFERENCE,
 ) -> Evaluation:
-    """ATE after ``alignment`` ("se3", "sim3" or "none") and RPE over ``delta`` poses."""
+    """ATE after ``alignment`` ("se3", "sim3" or "none") and RPE over ``delta`` poses, over the
+    poses paired by ``associate``."""
     if alignment not in ("se3", "sim3", "none"):
         raise ValueError(f"alignment is 'se3', 'sim3' or 'none', not {alignment!r}")
-    index_est, index_gt = associate(estimate, truth)
+    if not max_difference >= 0:
+        raise ValueError(f"the largest key difference must be 0 or more, not {max_difference}")
+    index_est, index_gt = associate(estimate, truth, max_difference)
     if index_est.size < 3:
-        raise ValueError(f"only {index_est.size} poses have keys in both trajectories; need ≥ 3")
+        raise ValueError(
+            f"only {index_est.size} poses pair with a ground-truth pose whose key (time stamp, "
+            f"node id or KITTI line) is within {max_difference:g}; need ≥ 3. The estimate's "
+            f"keys run from {_key_range(estimate.keys)}, the ground truth's from "
+            f"{_key_range(truth.keys)}"
+        )
     if not 1 <= delta < index_est.size:
         raise ValueError(
             f"the RPE step is 1 to {index_est.size - 1} poses (of the {index_est.size} matched), "
@@ -104,5 +145,7 @@ def evaluate(
         ErrorStatistics.of(rpe_t),
         ErrorStatistics.of(rpe_r),
         int(index_est.size),
+        len(estimate.keys),
+        max_difference,
         aligned,
     )

@@ -1,0 +1,81 @@
+"""Pairing of estimate and ground-truth poses by key, and the ATE over the pairs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from posegraph.evaluation import associate, evaluate
+from posegraph.lie import SE3
+from posegraph.trajectory_io import Trajectory
+
+
+def _trajectory(keys: np.ndarray, seed: int = 0) -> Trajectory:
+    return Trajectory(
+        np.asarray(keys, float), SE3.sample(np.random.default_rng(seed), (len(keys),))
+    )
+
+
+def _greedy_pairs(estimate_keys, truth_keys, max_difference):
+    """The TUM benchmark's associate.py: every pair within max_difference, taken by increasing
+    difference, each pose of either side used once."""
+    candidates = sorted(
+        (abs(a - b), i, j)
+        for i, a in enumerate(estimate_keys)
+        for j, b in enumerate(truth_keys)
+        if abs(a - b) <= max_difference
+    )
+    used_est, used_gt, pairs = set(), set(), []
+    for _, i, j in candidates:
+        if i not in used_est and j not in used_gt:
+            used_est.add(i)
+            used_gt.add(j)
+            pairs.append((i, j))
+    return sorted(pairs, key=lambda pair: estimate_keys[pair[0]])
+
+
+def test_time_stamps_pair_as_the_tum_benchmark_pairs_them():
+    """A 100 Hz ground truth (shuffled) and a 30 Hz estimate with clock jitter and gaps."""
+    rng = np.random.default_rng(4)
+    truth_keys = 1305031102.175304 + 0.01 * np.arange(2000)
+    truth_keys = truth_keys[rng.permutation(len(truth_keys))]
+    estimate_keys = 1305031101.9 + np.arange(0.0, 21.0, 1 / 30) + rng.uniform(-0.01, 0.01, 630)
+    estimate_keys = np.delete(estimate_keys, np.arange(100, 140))  # tracking lost
+    index_est, index_gt = associate(_trajectory(estimate_keys), _trajectory(truth_keys), 0.02)
+    expected = _greedy_pairs(estimate_keys.tolist(), truth_keys.tolist(), 0.02)
+    assert list(zip(index_est.tolist(), index_gt.tolist(), strict=True)) == expected
+    assert np.all(np.diff(estimate_keys[index_est]) > 0)
+    assert 500 < len(expected) < len(estimate_keys)  # the ends outside the ground truth drop
+
+
+def test_a_ground_truth_pose_pairs_once_with_the_nearest_estimate():
+    index_est, index_gt = associate(_trajectory([1.0, 1.004, 1.009]), _trajectory([1.005, 2.0]))
+    assert index_est.tolist() == [1] and index_gt.tolist() == [0]
+
+
+def test_integer_keys_pair_only_when_equal():
+    estimate, truth = _trajectory([5, 1, 2, 9, 3]), _trajectory([0, 1, 2, 3, 4, 5, 6])
+    index_est, index_gt = associate(estimate, truth)
+    assert estimate.keys[index_est].tolist() == [1, 2, 3, 5]
+    assert truth.keys[index_gt].tolist() == [1, 2, 3, 5]
+
+
+def test_ate_of_the_true_poses_at_jittered_stamps_is_zero():
+    truth = _trajectory(100.0 + 0.01 * np.arange(500), seed=1)
+    picked = np.arange(2, 500, 3)
+    jitter = np.random.default_rng(2).uniform(-0.004, 0.004, picked.size)
+    estimate = Trajectory(truth.keys[picked] + jitter, truth.poses[picked])
+    evaluation = evaluate(estimate, truth)
+    assert evaluation.matched == evaluation.estimate_poses == picked.size
+    assert evaluation.ate.rmse < 1e-12 and evaluation.rpe_rotation_deg.max < 1e-9
+    strict = evaluate(estimate, truth, max_difference=0.001)
+    assert strict.matched < picked.size // 2
+
+
+def test_no_pairs_names_both_key_ranges():
+    ids, stamps = _trajectory(np.arange(10)), _trajectory(1305031102.5 + np.arange(10))
+    with pytest.raises(
+        ValueError,
+        match=r"only 0 poses pair .* within 0\.02.* from 0 to 9, .* from 1305031102\.5 to 1305031111\.5",
+    ):
+        evaluate(ids, stamps)
