@@ -93,7 +93,19 @@ MALFORMED = [
         2,
         "two dialects",
     ),
-    ("only-fix-lines", "FIX 0\n", 1, "only FIX or EQUIV lines"),
+    ("only-fix-lines", "FIX 0\n", 1, "only FIX lines"),
+    (
+        "se3-prior-offset-undefined",
+        SE3_V0 + SE3_V1 + f"EDGE_SE3_PRIOR 0 2 0 0 0 0 0 0 1 {INFO3}\n",
+        3,
+        "offset parameter 2 is not defined by a PARAMS_SE3OFFSET line",
+    ),
+    (
+        "se3-offset-defined-twice",
+        "PARAMS_SE3OFFSET 0 0 0 0 0 0 0 1\nPARAMS_SE3OFFSET 0 1 0 0 0 0 0 1\n" + SE3_V0,
+        2,
+        "PARAMS_SE3OFFSET 0 is defined again (first on line 1)",
+    ),
     ("equiv-unknown-node", "VERTEX2 0 0 0 0\nVERTEX2 1 1 0 0\nEQUIV 0 4\n", 3, "refers to node 4"),
     (
         "toro-information-not-positive-definite",

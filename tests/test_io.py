@@ -9,6 +9,7 @@ import stat
 import numpy as np
 import pytest
 
+from posegraph.factors import chi2
 from posegraph.graph import PoseGraph
 from posegraph.io import GraphFileError, ReadOptions, read_graph, write_graph
 from posegraph.lie import SE2, SE3, Sim3
@@ -81,6 +82,39 @@ def test_negative_zero_is_written_as_zero(tmp_path):
     write_trajectory(Trajectory(graph.node_ids, as_se3(graph.values)), str(tum), "tum")
     for path in (written, tum):
         assert "-0.0" not in path.read_text().split()
+
+
+def test_se3_prior_is_on_the_pose_times_its_offset(tmp_path):
+    """g2o's EDGE_SE3_PRIOR weighs r = Log(Z⁻¹ X O), O its PARAMS_SE3OFFSET."""
+    rng = np.random.default_rng(7)
+    offset, measurement = SE3.sample(rng), SE3.sample(rng)
+    information = rng.normal(size=(6, 6))
+    information = information @ information.T + np.eye(6)
+    upper = information[np.triu_indices(6)]
+
+    def pose_text(pose):
+        q, t = pose.as_quaternion_translation()
+        return " ".join(repr(x) for x in np.concatenate([t, q]).tolist())
+
+    path = tmp_path / "prior.g2o"
+    path.write_text(
+        f"PARAMS_SE3OFFSET 0 0 0 0 0 0 0 1\nPARAMS_SE3OFFSET 4 {pose_text(offset)}\n"
+        f"VERTEX_SE3:QUAT 7 0 0 0 0 0 0 1\n"
+        f"EDGE_SE3_PRIOR 7 4 {pose_text(measurement)} {' '.join(map(repr, upper.tolist()))}\n"
+    )
+    graph = read_graph(str(path)).graph
+    for _ in range(3):
+        pose = SE3.sample(rng)
+        graph.set_values(SE3(pose.rotation[None], pose.translation[None]))
+        r = measurement.inverse().compose(pose).compose(offset).log()
+        assert chi2(graph.values, graph.edges, graph.priors) == pytest.approx(
+            r @ information @ r, rel=1e-9
+        )
+    written = tmp_path / "written.g2o"
+    write_graph(graph, str(written))
+    assert written.read_text().startswith("PARAMS_SE3OFFSET 0 0.0 0.0 0.0 0.0 0.0 0.0 1.0\n")
+    again = read_graph(str(written)).graph
+    np.testing.assert_allclose(again.priors.information, graph.priors.information, rtol=1e-12)
 
 
 @pytest.mark.parametrize("dialect", ["a", "b"])

@@ -13,7 +13,15 @@ from ..lie import SE3, Sim3
 from ..lifting import default_scale_information, lift_information, lift_se3
 from .errors import GraphFileError
 from .parsing import LineChecker, Rows, read_lines, to_rows
-from .tags import EDGE2_ORDERS, G2O_TAGS, TORO_TAGS, TagFormat, edge2_information, edge2_order_text
+from .tags import (
+    EDGE2_ORDERS,
+    G2O_TAGS,
+    TORO_TAGS,
+    TagFormat,
+    edge2_information,
+    edge2_order_text,
+    prior_without_offset,
+)
 
 ALL_TAGS: dict[str, TagFormat] = {**G2O_TAGS, **TORO_TAGS}
 
@@ -77,6 +85,7 @@ class _Collected:
     vertices: list = dataclasses.field(default_factory=list)  # (rows, values)
     edges: list = dataclasses.field(default_factory=list)  # (rows, measurements, information)
     priors: list = dataclasses.field(default_factory=list)
+    parameters: list = dataclasses.field(default_factory=list)  # (rows, SE3 offsets)
     fixes: list = dataclasses.field(default_factory=list)  # rows
     equivalences: list = dataclasses.field(default_factory=list)  # rows
 
@@ -171,10 +180,60 @@ def _convert(spec: TagFormat, rows: Rows, options: ReadOptions, checker, collect
         converted = _check_information(rows, measurements, information, checker, options)
         if len(converted[0]):
             (collected.edges if spec.kind == "edge" else collected.priors).append(converted)
+    elif spec.kind == "parameter":
+        collected.parameters.append((rows, spec.parse(rows.numbers, options)))
     elif spec.kind == "fix":
         collected.fixes.append(rows)
     else:
         collected.equivalences.append(rows)
+
+
+def _offsets(collected: _Collected, checker: LineChecker) -> tuple[dict[float, int], SE3]:
+    """The PARAMS_SE3OFFSET lines: each parameter id's position, and the offsets."""
+    position: dict[float, int] = {}
+    first_line: dict[float, int] = {}
+    kept = []
+    for rows, offsets in collected.parameters:
+        lines, keys = rows.line_numbers.tolist(), rows.numbers[:, 0].tolist()
+        for k, (line, key) in enumerate(zip(lines, keys, strict=True)):
+            if key in position:
+                checker.fail(
+                    line,
+                    f"PARAMS_SE3OFFSET {key:g} is defined again (first on line {first_line[key]})",
+                )
+                continue
+            position[key], first_line[key] = len(kept), line
+            kept.append(offsets[k : k + 1])
+    return position, SE3.concatenate(kept) if kept else SE3.identity((0,))
+
+
+def _prior_on_node(record: tuple, position: dict[float, int], offsets: SE3, checker) -> tuple:
+    """An EDGE_SE3_PRIOR record (rows, measurements, information) re-expressed on its node itself
+    (``prior_without_offset``), with the offset its line names."""
+    rows, measurements, information = record
+    keys = rows.numbers[:, 1]
+    undefined = ~np.isin(keys, list(position))
+    rows = checker.keep_good(
+        rows,
+        undefined,
+        lambda k: (
+            f"offset parameter {keys[k]:g} is not defined by a PARAMS_SE3OFFSET line (for no"
+            f" offset, add 'PARAMS_SE3OFFSET {keys[k]:g} 0 0 0 0 0 0 1' before it, as g2o does)"
+        ),
+    )
+    used = offsets[np.array([position[key] for key in rows.numbers[:, 1].tolist()], dtype=int)]
+    return rows, *prior_without_offset(measurements[~undefined], information[~undefined], used)
+
+
+def _apply_prior_offsets(collected: _Collected, checker: LineChecker) -> None:
+    """Re-express every EDGE_SE3_PRIOR on its node (g2o priors measure the node's offset pose)."""
+    position, offsets = _offsets(collected, checker)
+    collected.priors = [
+        _prior_on_node(record, position, offsets, checker)
+        if record[0].tag == "EDGE_SE3_PRIOR"
+        else record
+        for record in collected.priors
+    ]
 
 
 def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
@@ -216,7 +275,8 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
         )
     if not groups:
         first = min(entries[0][0] for entries in lines_by_tag.values())
-        raise GraphFileError(path, first, "holds no vertices or edges, only FIX or EQUIV lines")
+        tags = " and ".join(sorted(lines_by_tag))
+        raise GraphFileError(path, first, f"holds no vertices or edges, only {tags} lines")
     group = groups.pop()
 
     collected = _Collected()
@@ -227,6 +287,7 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
         rows = to_rows(tag, entries, spec.widths, spec.id_columns, checker, spec.information_values)
         if rows is not None:
             _convert(spec, rows, options, checker, collected)
+    _apply_prior_offsets(collected, checker)
 
     if group is Sim3:
         _lift_se3_records(collected, options.scale_information)
@@ -234,7 +295,7 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
     tag_counts = Counter()
     for rows, *_ in collected.vertices + collected.edges + collected.priors:
         tag_counts[rows.tag] += len(rows)
-    for rows in collected.fixes + collected.equivalences:
+    for rows in collected.fixes + collected.equivalences + [r for r, _ in collected.parameters]:
         tag_counts[rows.tag] += len(rows)
     sim3_dialect = None
     if "VERTEX_SIM3:EXPMAP" in lines_by_tag or "EDGE_SIM3:EXPMAP" in lines_by_tag:

@@ -5,6 +5,8 @@ Conventions (CONVENTIONS.md, "g2o and TORO files"):
 * information is given as the row-major upper triangle over the tag's own tangent order;
 * SE3 information is taken as-is over (ρ, φ), unless the g2o-faithful reading is asked for
   (g2o's rotation error is the quaternion vector part ≈ φ/2): Λ_φφ = Λ_qq/4, Λ_ρφ = Λ_ρq/2;
+* g2o's EDGE_SE3_PRIOR measures the node's pose times the offset of a PARAMS_SE3OFFSET line
+  (``prior_without_offset`` moves it onto the node); written priors use offset 0, the identity;
 * g2o's Sim3 tangent is (ω, υ, σ), permuted here to (ρ, φ, σ). A g2o Sim3 vertex stores the
   world → camera Sᵢ, so our Xᵢ = Sᵢ⁻¹; an edge measurement Z becomes ours as Z⁻¹.
   Dialect (a) writes the element (q, t, s); dialect (b) writes log(S⁻¹) = log(Xᵢ) (vertex,
@@ -39,10 +41,10 @@ EDGE2_ORDERS = {
 class TagFormat:
     """One line type.
 
-    ``kind`` is vertex, edge, prior, fix or equiv. ``widths`` are the accepted counts of numbers
+    ``kind`` is vertex, edge, prior, parameter, fix or equiv. ``widths`` are the accepted counts of numbers
     after the tag (one per dialect), ``id_columns`` the columns holding node ids, and
     ``quaternion`` the columns of a quaternion to check. ``parse(numbers, options)`` returns
-    the values (vertex) or the measurements and information (edge, prior).
+    the values (vertex, parameter) or the measurements and information (edge, prior).
     """
 
     kind: str
@@ -107,6 +109,18 @@ def edge2_order_text(order: str) -> str:
 
 def toro2_information_to_file(information: np.ndarray) -> np.ndarray:
     return np.stack([information[:, r, c] for r, c in EDGE2_ORDERS["toro"]], axis=1)
+
+
+def prior_without_offset(
+    measurements: SE3, information: np.ndarray, offsets: SE3
+) -> tuple[SE3, np.ndarray]:
+    """g2o's EDGE_SE3_PRIOR measures the node's pose times its PARAMS_SE3OFFSET O (g2o
+    ``EdgeSE3Prior``: Z⁻¹ X O). As Log(Z⁻¹ X O) = Log(O⁻¹ (Z O⁻¹)⁻¹ X O) = Ad(O⁻¹) Log((Z O⁻¹)⁻¹ X),
+    the same prior on X itself has measurement Z O⁻¹ and information Ad(O⁻¹)ᵀ Ω Ad(O⁻¹)."""
+    inverse = offsets.inverse()
+    adjoint = inverse.adjoint()
+    moved = np.swapaxes(adjoint, -1, -2) @ information @ adjoint
+    return measurements.compose(inverse), 0.5 * (moved + np.swapaxes(moved, -1, -2))
 
 
 # ------------------------------------------------------------------------- element parsing
@@ -195,7 +209,15 @@ G2O_TAGS: dict[str, TagFormat] = {
         ),
         quaternion={30: slice(5, 9)},
     ),
-    "EDGE_SE3_PRIOR": TagFormat(  # id, offset parameter id (taken as the identity), pose, info
+    "PARAMS_SE3OFFSET": TagFormat(  # parameter id, x y z qx qy qz qw
+        "parameter",
+        None,
+        (8,),
+        (),
+        lambda n, o: _quaternion_pose(n, 1),
+        quaternion={8: slice(4, 8)},
+    ),
+    "EDGE_SE3_PRIOR": TagFormat(  # id, offset parameter id, pose, info (see prior_without_offset)
         "prior",
         SE3,
         (30,),

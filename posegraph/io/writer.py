@@ -84,6 +84,10 @@ def format_g2o(
         prior_numbers = np.hstack([priors.measurements.as_xytheta(), prior_info])
         lines += _lines("EDGE_PRIOR_SE2", [ids[priors.i]], prior_numbers)
     elif graph.group is SE3:
+        if len(priors):  # g2o's EDGE_SE3_PRIOR names an offset parameter, defined first
+            lines += _lines(
+                "PARAMS_SE3OFFSET", [np.zeros(1, int)], _pose_numbers(SE3.identity((1,)), True)
+            )
         lines += _lines("VERTEX_SE3:QUAT", [ids], _pose_numbers(graph.values, True))
         info = se3_information_to_file(edges.information, g2o_rotation_information)
         lines += _lines(
