@@ -78,6 +78,8 @@ def associate(
     """Indices (into the estimate, into the truth) of the pairs, in the order of the estimate's
     keys. Each estimate pose pairs with the ground-truth pose of the nearest key, if they differ
     by at most ``max_difference``; a ground-truth pose claimed by several keeps the nearest."""
+    if not len(truth.keys) or not len(estimate.keys):
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     order = np.argsort(truth.keys, kind="stable")
     keys = truth.keys[order]
     after = np.searchsorted(keys, estimate.keys).clip(max=len(keys) - 1)
@@ -93,7 +95,7 @@ def associate(
 
 
 def _key_range(keys: np.ndarray) -> str:
-    return f"{keys.min():.15g} to {keys.max():.15g}"
+    return f"run from {keys.min():.15g} to {keys.max():.15g}" if len(keys) else "are none"
 
 
 def evaluate(
@@ -114,8 +116,7 @@ def evaluate(
         raise ValueError(
             f"only {index_est.size} poses pair with a ground-truth pose whose key (time stamp, "
             f"node id or KITTI line) is within {max_difference:g}; need ≥ 3. The estimate's "
-            f"keys run from {_key_range(estimate.keys)}, the ground truth's from "
-            f"{_key_range(truth.keys)}"
+            f"keys {_key_range(estimate.keys)}, the ground truth's {_key_range(truth.keys)}"
         )
     if not 1 <= delta < index_est.size:
         raise ValueError(

@@ -72,10 +72,18 @@ def test_ate_of_the_true_poses_at_jittered_stamps_is_zero():
     assert strict.matched < picked.size // 2
 
 
+def test_an_empty_trajectory_pairs_nothing():
+    empty, poses = _trajectory([]), _trajectory(np.arange(5))
+    for estimate, truth in ((empty, poses), (poses, empty)):
+        assert all(index.size == 0 for index in associate(estimate, truth))
+        with pytest.raises(ValueError, match="are none"):
+            evaluate(estimate, truth)
+
+
 def test_no_pairs_names_both_key_ranges():
     ids, stamps = _trajectory(np.arange(10)), _trajectory(1305031102.5 + np.arange(10))
     with pytest.raises(
         ValueError,
-        match=r"only 0 poses pair .* within 0\.02.* from 0 to 9, .* from 1305031102\.5 to 1305031111\.5",
+        match=r"only 0 poses pair .* within 0\.02.* keys run from 0 to 9, the ground truth's run from 1305031102\.5 to 1305031111\.5",
     ):
         evaluate(ids, stamps)

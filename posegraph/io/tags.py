@@ -41,8 +41,8 @@ EDGE2_ORDERS = {
 class TagFormat:
     """One line type.
 
-    ``kind`` is vertex, edge, prior, parameter, fix or equiv. ``widths`` are the accepted counts of numbers
-    after the tag (one per dialect), ``id_columns`` the columns holding node ids, and
+    ``kind`` is vertex, edge, prior, parameter, fix or equiv. ``widths`` are the accepted counts
+    of numbers after the tag (one per dialect), ``id_columns`` the columns holding node ids, and
     ``quaternion`` the columns of a quaternion to check. ``parse(numbers, options)`` returns
     the values (vertex, parameter) or the measurements and information (edge, prior).
     """
