@@ -74,7 +74,7 @@ def _solve(pattern: BlockPattern, blocks: np.ndarray, pieces: np.ndarray) -> np.
     """Minimise Σₑ ‖Jₑ x + r⁰ₑ‖²_W over the free blocks: H x = −g, one right-hand side per
     trailing column of ``pieces`` (2m, d, k), all with one factorisation. Returns (n, d, k)
     with zeros at held nodes."""
-    pattern.factorize(pattern.matrix_data(blocks))
+    pattern.factorize_regularized(pattern.matrix_data(blocks))
     columns = pieces.shape[2]
     rhs = np.stack([pattern.vector(pieces[:, :, c]) for c in range(columns)], axis=1)
     return pattern.scatter(pattern.solve(-rhs))

@@ -123,7 +123,7 @@ def gnc_tls(
         )
         rounds, iterations = rounds + stage_rounds, iterations + stage_iterations
         objective = _tls_objective(graph, result.values, mask, width_sq)
-        if objective < best_objective:
+        if best is None or objective < best_objective:  # the first, even if not finite
             best, best_objective = (result, weights), objective
     result, weights = best
 

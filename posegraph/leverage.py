@@ -104,7 +104,9 @@ def _whitened(
 def _factorize(
     graph: PoseGraph, values: LieGroup, linear_solver: str, for_covariance: bool = False
 ) -> _Factored:
-    system, between = factorized_information(graph, values, linear_solver, for_covariance)
+    system, between = factorized_information(
+        graph, values, linear_solver, for_covariance, regularize=True
+    )
     prior_rows = (
         information_root(graph.priors.information) @ linearize_priors(values, graph.priors).jac_j
     )
@@ -113,9 +115,13 @@ def _factorize(
 
 def _eigen(whitened: np.ndarray, matrices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Eigenvalues λ of the symmetrised Bₑ, clipped at ``SMALLEST_COMPLEMENT``, and r̃ₑ in
-    their eigenbasis: r̃ₑᵀ Bₑ⁻ᵏ r̃ₑ = Σ projected² / λᵏ."""
-    eigenvalues, eigenvectors = np.linalg.eigh(0.5 * (matrices + np.swapaxes(matrices, 1, 2)))
-    projected = np.einsum("mba,mb->ma", eigenvectors, whitened)
+    their eigenbasis: r̃ₑᵀ Bₑ⁻ᵏ r̃ₑ = Σ projected² / λᵏ. An edge whose residual or Bₑ
+    overflowed gets λ = 1 and projected = ∞, so that its r̃ₑᵀ Bₑ⁻ᵏ r̃ₑ is ∞."""
+    finite = np.isfinite(whitened).all(axis=1) & np.isfinite(matrices).all(axis=(1, 2))
+    eigenvalues, projected = np.ones_like(whitened), np.full_like(whitened, np.inf)
+    symmetric = 0.5 * (matrices[finite] + np.swapaxes(matrices[finite], 1, 2))
+    eigenvalues[finite], eigenvectors = np.linalg.eigh(symmetric)
+    projected[finite] = np.einsum("mba,mb->ma", eigenvectors, whitened[finite])
     return eigenvalues.clip(min=SMALLEST_COMPLEMENT), projected
 
 

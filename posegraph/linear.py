@@ -21,7 +21,10 @@ import scipy.sparse
 from .factors import Linearization, linearize_between, linearize_priors
 from .graph import PoseGraph
 from .lie import LieGroup
-from .sparse_cholesky import make_cholesky
+from .sparse_cholesky import NotPositiveDefinite, make_cholesky
+
+RIDGES = (1e-12, 1e-9, 1e-6)
+"""Relative ridges ε (H + ε diag(H)) that ``factorize_regularized`` tries, smallest first."""
 
 
 class BlockPattern:
@@ -194,6 +197,30 @@ class BlockPattern:
             data[self.diagonal_positions] += damping
         self.cholesky.factorize(data)
 
+    def factorize_regularized(self, data: np.ndarray) -> None:
+        """Factorise the matrix, or if it is not numerically positive definite (weights of
+        extreme range), the matrix plus the smallest ridge ε diag(H), ε in ``RIDGES``, that is.
+        For systems whose solution is an estimate (initial values, leverage), where the ridge's
+        change does not matter; raises ``NotPositiveDefinite`` if no ridge helps."""
+        try:
+            self.factorize(data)
+            return
+        except NotPositiveDefinite:
+            diagonal = self.diagonal(data)
+        for ridge in RIDGES:
+            try:
+                self.factorize(data, ridge * diagonal)
+                return
+            except NotPositiveDefinite:
+                continue
+        raise NotPositiveDefinite(
+            f"not numerically positive definite, even with a ridge of {RIDGES[-1]:g} diag(H)"
+        )
+
+    def diagonal(self, data: np.ndarray) -> np.ndarray:
+        """diag(H) from its CSC data."""
+        return data[self.diagonal_positions]
+
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """Solve with the last factorisation."""
         return self.cholesky.solve(rhs)
@@ -270,19 +297,20 @@ class NormalEquations(BlockPattern):
         np.matmul(jpt_omega, priors.residuals[:, :, None], out=pieces[2 * m :, :, None])
         return self.matrix_data(blocks), self.vector(pieces)
 
-    def diagonal(self, data: np.ndarray) -> np.ndarray:
-        """diag(H) from its CSC data."""
-        return data[self.diagonal_positions]
-
 
 def factorized_information(
-    graph: PoseGraph, values: LieGroup, linear_solver: str = "auto", for_covariance: bool = False
+    graph: PoseGraph,
+    values: LieGroup,
+    linear_solver: str = "auto",
+    for_covariance: bool = False,
+    regularize: bool = False,
 ) -> tuple[NormalEquations, Linearization]:
     """The information matrix H = Σ Jᵀ Ω J of ``graph`` at ``values`` (priors included, gauge
-    nodes held), assembled and factorised, with the between edges' linearisation."""
+    nodes held), assembled and factorised (with ``regularize``, by ``factorize_regularized``),
+    with the between edges' linearisation."""
     system = NormalEquations(graph, graph.gauge_nodes(), linear_solver, for_covariance)
     between = linearize_between(values, graph.edges)
     priors = linearize_priors(values, graph.priors)
     data, _ = system.assemble(between, graph.edges.information, priors, graph.priors.information)
-    system.factorize(data)
+    (system.factorize_regularized if regularize else system.factorize)(data)
     return system, between

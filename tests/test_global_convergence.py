@@ -16,7 +16,7 @@ from posegraph.evaluation import evaluate
 from posegraph.gnc import gnc_tls
 from posegraph.graph import PoseGraph
 from posegraph.initialization import choose, initialize
-from posegraph.lie import SE2, SE3
+from posegraph.lie import SE2, SE3, Sim3
 from posegraph.robust import KERNELS, RobustKernel, default_width, tls_gnc_weights
 from posegraph.trajectory_io import Trajectory, as_se3
 
@@ -41,6 +41,21 @@ def test_chordal_recovers_noise_free_poses_exactly(generate):
     exact.set_values(graph.values.set_at(0, truth[0]))  # the held node at its true value
     values = chordal_values(exact)
     np.testing.assert_allclose(values.as_matrix(), truth.as_matrix(), atol=1e-8)
+
+
+@pytest.mark.parametrize("group", [SE3, Sim3], ids=lambda g: g.__name__)
+def test_chordal_survives_information_of_extreme_range(group):
+    """One translation weight of 1e20 beside 100s, a range beyond double precision for normal
+    equations (the doctor flags such matrices): H is not numerically positive definite, and
+    chordal's solve takes the smallest ridge that factorises instead of failing."""
+    truth = group.exp(np.random.default_rng(1).normal(scale=0.3, size=(6, group.dof)))
+    graph = PoseGraph(group)
+    graph.add_nodes(np.arange(6), truth)
+    information = np.broadcast_to(100.0 * np.eye(group.dof), (6, group.dof, group.dof)).copy()
+    information[2, 2, 2], information[2, 0, 1], information[2, 1, 0] = 1e20, 2.0, 2.0
+    following = (np.arange(6) + 1) % 6
+    graph.add_edges(np.arange(6), following, truth.between(truth[following]), information)
+    assert np.isfinite(chordal_values(graph).as_matrix()).all()
 
 
 @pytest.mark.parametrize("group", [SE2, SE3], ids=lambda g: g.__name__)
