@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 
@@ -30,9 +31,20 @@ def _options(args: argparse.Namespace) -> ReadOptions:
     )
 
 
+def _json_safe(value):
+    """``value`` with every float that is not finite as None (JSON has no NaN or ∞)."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {key: _json_safe(item) for key, item in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_safe(item) for item in value]
+    return value
+
+
 def _emit(args: argparse.Namespace, record: dict, text: str) -> None:
     if args.json:
-        print(json.dumps(record, indent=2))
+        print(json.dumps(_json_safe(record), indent=2, allow_nan=False))
     elif not args.quiet:
         print(text)
 
@@ -90,6 +102,12 @@ def optimize(args: argparse.Namespace) -> int:
     if progress.interrupted:
         summary.termination = "interrupted (Ctrl-C)"
         summary.converged = False
+    if not math.isfinite(summary.final_error):
+        raise UsageError(
+            f"{args.input}: the optimisation ended with error {summary.final_error} (at the file's "
+            f"values: {summary.input_error}); numbers this large overflow in double precision. "
+            "Nothing written"
+        )
     graph.set_values(result.values)
     if args.output:
         convert_graph(

@@ -11,6 +11,7 @@ import argparse
 import os
 import sys
 import traceback
+import warnings
 
 import posegraph
 from posegraph.evaluation import MAX_KEY_DIFFERENCE
@@ -225,7 +226,10 @@ def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     handler = getattr(commands, args.command.replace("-", "_"))
     try:
-        return handler(args)
+        with warnings.catch_warnings():
+            if not args.debug:  # numpy's overflow warnings name library lines, not the input's
+                warnings.simplefilter("ignore", RuntimeWarning)
+            return handler(args)
     except BrokenPipeError:  # the reader of stdout went away (`posegraph info g.g2o | head`)
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no error at exit
         return EXIT_NOT_CONVERGED

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-_NUMBER = {"type": "number"}
+_NUMBER = {"type": ["number", "null"]}
+"""A number, or null where it is not finite (JSON has no NaN or ∞): an error that overflowed."""
 _STATS = {
     "type": "object",
     "required": ["rmse", "mean", "median", "max", "count"],

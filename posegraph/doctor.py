@@ -149,7 +149,15 @@ def diagnose(read: ReadResult) -> Diagnosis:
                 "starts a graph with loops from chordal relaxation instead",
             )
         )
-    total = chi2(graph.values, graph.edges, graph.priors)
+    with np.errstate(over="ignore", invalid="ignore"):
+        total = chi2(graph.values, graph.edges, graph.priors)
+    if not np.isfinite(total):
+        problems.append(
+            Problem(
+                f"the error at the file's values is {total} (the residuals overflow)",
+                "some numbers are too large for double precision (beyond about 1e154, squares overflow)",
+            )
+        )
     return Diagnosis(
         path=read.path,
         file_format=read.format,

@@ -12,8 +12,8 @@ import numpy as np
 
 from .io.atomic import atomic_write_text
 from .io.errors import GraphFileError
-from .io.parsing import read_lines
-from .io.writer import number_fields
+from .io.parsing import quaternion_problems, read_lines
+from .io.writer import number_fields, refuse_non_finite
 from .lie import SE2, SE3, LieGroup, Sim3
 
 
@@ -62,6 +62,7 @@ def format_kitti(trajectory: Trajectory) -> str:
 
 def write_trajectory(trajectory: Trajectory, path: str, file_format: str) -> None:
     """Write "tum" or "kitti" atomically."""
+    refuse_non_finite(path, trajectory.keys, trajectory.poses)
     text = {"tum": format_tum, "kitti": format_kitti}[file_format](trajectory)
     atomic_write_text(path, text)
 
@@ -89,9 +90,10 @@ def read_trajectory(path: str, file_format: str) -> Trajectory:
         rows.append(row)
     numbers = np.array(rows)
     if file_format == "tum":
-        norms = np.linalg.norm(numbers[:, 4:8], axis=1)
-        if np.any(norms < 1e-9):
-            raise GraphFileError(path, lines[int(np.argmin(norms))][0], "quaternion has zero norm")
+        problems = quaternion_problems(numbers[:, 4:8])
+        if problems:
+            first = min(problems)
+            raise GraphFileError(path, lines[first][0], problems[first])
         return Trajectory(
             numbers[:, 0], SE3.from_quaternion_translation(numbers[:, 4:8], numbers[:, 1:4])
         )

@@ -42,9 +42,13 @@ def run(*args, check_exit: int | None = 0, timeout: float = 300):
     return completed
 
 
-def run_json(command: str, *args):
-    completed = run(command, *args, "--json")
-    document = json.loads(completed.stdout)
+def _not_json(constant: str):
+    raise ValueError(f"{constant} is not JSON")
+
+
+def run_json(command: str, *args, check_exit: int = 0):
+    completed = run(command, *args, "--json", check_exit=check_exit)
+    document = json.loads(completed.stdout, parse_constant=_not_json)  # no NaN or Infinity
     jsonschema.validate(document, SCHEMAS[command])
     return document
 
@@ -268,6 +272,25 @@ def test_eval_reports_ate_and_rpe(tmp_path):
     assert "ATE" in text and "RPE" in text
     too_far = run("eval", optimised, truth_path, "--delta", 160, check_exit=2)
     assert "the RPE step is 1 to 159 poses (of the 160 matched), not 160" in too_far.stderr
+
+
+def test_numbers_that_overflow_are_reported_and_nothing_is_written(tmp_path):
+    """A translation of 1e200: its square overflows, so the error is ∞ at the file's values."""
+    lines = open(EXAMPLE_2D).read().splitlines()
+    first_edge = next(k for k, line in enumerate(lines) if line.startswith("EDGE_SE2"))
+    fields = lines[first_edge].split()
+    fields[3] = "1e200"
+    lines[first_edge] = " ".join(fields)
+    huge, out = tmp_path / "huge.g2o", tmp_path / "out.g2o"
+    huge.write_text("\n".join(lines) + "\n")
+    for robust in ([], ["--robust", "gnc"]):
+        failed = run("optimize", huge, "-o", out, *robust, check_exit=2)
+        assert "the optimisation ended with error" in failed.stderr, robust
+        assert "Nothing written" in failed.stderr and "Warning" not in failed.stderr, robust
+        assert not out.exists()
+    diagnosis = run_json("info", huge)
+    assert diagnosis["initial_error"] is None  # not finite: JSON has no ∞
+    assert any("residuals overflow" in problem["what"] for problem in diagnosis["problems"])
 
 
 def test_numeric_arguments_are_checked_by_the_parser():

@@ -74,6 +74,18 @@ def test_se2_numbers_are_written_back_as_read(tmp_path):
     ]
 
 
+def test_poses_that_are_not_finite_are_not_written(tmp_path):
+    graph = random_graph(SE3, 5, 2, seed=8)
+    graph.set_values(graph.values.set_at(3, SE3(np.full((3, 3), np.nan), np.zeros(3))))
+    for path in (tmp_path / "diverged.g2o", tmp_path / "diverged.tum"):
+        with pytest.raises(ValueError, match=r"not written: 1 of 5 poses are not finite"):
+            if path.suffix == ".g2o":
+                write_graph(graph, str(path))
+            else:
+                write_trajectory(Trajectory(graph.node_ids, graph.values), str(path), "tum")
+        assert not path.exists()
+
+
 def test_negative_zero_is_written_as_zero(tmp_path):
     source, written, tum = tmp_path / "a.g2o", tmp_path / "b.g2o", tmp_path / "b.tum"
     source.write_text("VERTEX_SE2 0 -0.0 0.0 -0.0\nVERTEX_SE2 1 1.0 -0.0 0.0\n")

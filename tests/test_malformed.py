@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 
 from posegraph.io import GraphFileError, read_graph
+from posegraph.trajectory_io import read_trajectory
 
 from .malformed import MALFORMED
 
@@ -35,3 +36,14 @@ def test_malformed_file_is_rejected_with_file_and_line(tmp_path, name, content, 
     where = f"{path}:{line}" if line is not None else str(path)
     assert str(error).startswith(f"{where}: ")
     assert "\n" not in str(error)
+
+
+@pytest.mark.parametrize(
+    "quaternion, words",
+    [("0 0 0 0", "quaternion has zero norm"), ("0 1e200 0 1", "quaternion's norm overflows")],
+)
+def test_tum_quaternion_that_is_no_rotation_is_rejected(tmp_path, quaternion, words):
+    path = tmp_path / "poses.tum"
+    path.write_text(f"0.0 1 2 3 0 0 0 1\n0.1 1 2 3 {quaternion}\n")
+    with pytest.raises(GraphFileError, match=rf"poses\.tum:2: {words}"):
+        read_trajectory(str(path), "tum")

@@ -188,3 +188,14 @@ def upper_from_symmetric(matrices: np.ndarray) -> np.ndarray:
     """Inverse of :func:`symmetric_from_upper`."""
     rows, cols = np.triu_indices(matrices.shape[-1])
     return matrices[:, rows, cols]
+
+
+def quaternion_problems(quaternions: np.ndarray) -> dict[int, str]:
+    """The rows of (n, 4) quaternions that are not rotations, with why: a zero norm, or a norm
+    too large to compute (the squares of its components overflow)."""
+    with np.errstate(over="ignore"):
+        norms = np.linalg.norm(quaternions, axis=1)
+    return {
+        int(k): "quaternion has zero norm" if norms[k] < 1e-9 else "quaternion's norm overflows"
+        for k in np.flatnonzero(~((norms >= 1e-9) & (norms < np.inf)))
+    }

@@ -12,7 +12,7 @@ from ..initialization import spanning_tree_values
 from ..lie import SE3, Sim3
 from ..lifting import default_scale_information, lift_information, lift_se3
 from .errors import GraphFileError
-from .parsing import LineChecker, Rows, read_lines, to_rows
+from .parsing import LineChecker, Rows, quaternion_problems, read_lines, to_rows
 from .tags import (
     EDGE2_ORDERS,
     G2O_TAGS,
@@ -157,15 +157,46 @@ def _pad_missing_information(entries: list, spec: TagFormat) -> list:
     ]
 
 
+def _finite(rows: Rows, pieces: tuple, checker: LineChecker) -> tuple[Rows, tuple]:
+    """The rows whose pieces (a group element, then information matrices) are finite, and the
+    element's inverse too, and their pieces; the others are refused: a number overflowed, or
+    underflowed (a Sim3 log-scale of ±1e20 gives a scale of ∞ or 0)."""
+    element = pieces[0]
+    finite = np.isfinite(element.as_matrix()).all(axis=(1, 2))
+    finite &= np.isfinite(element.inverse().as_matrix()).all(axis=(1, 2))
+    for information in pieces[1:]:
+        finite &= np.isfinite(information).all(axis=(1, 2))
+    if finite.all():
+        return rows, pieces
+    rows = checker.keep_good(
+        rows,
+        ~finite,
+        lambda k: "a number is out of range: the line's pose or information overflows",
+    )
+    return rows, tuple(piece[finite] for piece in pieces)
+
+
+def _parse(spec: TagFormat, rows: Rows, options: ReadOptions, checker: LineChecker):
+    """(rows, ``spec.parse`` of them), without the rows whose numbers overflow."""
+    with np.errstate(all="ignore"):  # overflow is found by _finite
+        parsed = spec.parse(rows.numbers, options)
+        if isinstance(parsed, tuple):
+            return _finite(rows, parsed, checker)
+        rows, (values,) = _finite(rows, (parsed,), checker)
+    return rows, values
+
+
 def _convert(spec: TagFormat, rows: Rows, options: ReadOptions, checker, collected):
     columns = spec.quaternion.get(rows.numbers.shape[1])
     if columns is not None:
-        norms = np.linalg.norm(rows.numbers[:, columns], axis=1)
-        rows = checker.keep_good(rows, norms < 1e-9, lambda k: "quaternion has zero norm")
+        problems = quaternion_problems(rows.numbers[:, columns])
+        bad = np.zeros(len(rows), dtype=bool)
+        bad[list(problems)] = True
+        rows = checker.keep_good(rows, bad, problems.__getitem__)
     if not len(rows):
         return
     if spec.kind == "vertex":
-        collected.vertices.append((rows, spec.parse(rows.numbers, options)))
+        collected.vertices.append(_parse(spec, rows, options, checker))
     elif spec.kind in ("edge", "prior"):
         if spec.kind == "edge":
             loops = rows.ids(0) == rows.ids(1)
@@ -174,14 +205,14 @@ def _convert(spec: TagFormat, rows: Rows, options: ReadOptions, checker, collect
             )
             if not len(rows):
                 return
-        measurements, information = spec.parse(rows.numbers, options)
+        rows, (measurements, information) = _parse(spec, rows, options, checker)
         if options.identity_information:
             information = np.broadcast_to(np.eye(spec.group.dof), information.shape).copy()
         converted = _check_information(rows, measurements, information, checker, options)
         if len(converted[0]):
             (collected.edges if spec.kind == "edge" else collected.priors).append(converted)
     elif spec.kind == "parameter":
-        collected.parameters.append((rows, spec.parse(rows.numbers, options)))
+        collected.parameters.append(_parse(spec, rows, options, checker))
     elif spec.kind == "fix":
         collected.fixes.append(rows)
     else:
@@ -222,7 +253,10 @@ def _prior_on_node(record: tuple, position: dict[float, int], offsets: SE3, chec
         ),
     )
     used = offsets[np.array([position[key] for key in rows.numbers[:, 1].tolist()], dtype=int)]
-    return rows, *prior_without_offset(measurements[~undefined], information[~undefined], used)
+    with np.errstate(all="ignore"):  # overflow is found by _finite
+        moved = prior_without_offset(measurements[~undefined], information[~undefined], used)
+        rows, (measurements, information) = _finite(rows, moved, checker)
+    return rows, measurements, information
 
 
 def _apply_prior_offsets(collected: _Collected, checker: LineChecker) -> None:

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from ..graph import PoseGraph
-from ..lie import SE2, SE3, Sim3
+from ..lie import SE2, SE3, LieGroup, Sim3
 from .atomic import atomic_write_text
 from .parsing import upper_from_symmetric
 from .tags import (
@@ -24,6 +24,17 @@ TORO_SUFFIXES = (".graph", ".toro")
 def number_fields(numbers: np.ndarray) -> list[list[str]]:
     """The text of each row's numbers: repr, which round-trips exactly, with −0.0 as 0.0."""
     return [[repr(x) for x in row] for row in (np.asarray(numbers, float) + 0.0).tolist()]
+
+
+def refuse_non_finite(path: str, keys: np.ndarray, values: LieGroup) -> None:
+    """Raise before anything is written to ``path`` if a pose is not finite (an optimisation that
+    diverged): no reader accepts NaN or ∞, ours included."""
+    bad = np.flatnonzero(~np.isfinite(values.as_matrix()).all(axis=(-2, -1)))
+    if bad.size:
+        raise ValueError(
+            f"{path}: not written: {bad.size} of {len(keys)} poses are not finite, "
+            f"the first that of {keys[bad[0]].tolist()}"
+        )
 
 
 def _lines(tag: str, ids: list[np.ndarray], numbers: np.ndarray) -> list[str]:
@@ -153,6 +164,7 @@ def write_graph(
     sim3_dialect: str = "a",
 ) -> None:
     """Write atomically; the format is "g2o" or "toro", or guessed from the suffix."""
+    refuse_non_finite(path, graph.node_ids, graph.values)
     if file_format is None:
         file_format = "toro" if Path(path).suffix.lower() in TORO_SUFFIXES else "g2o"
     if file_format == "toro":
