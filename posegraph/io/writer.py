@@ -32,8 +32,8 @@ def refuse_non_finite(path: str, keys: np.ndarray, values: LieGroup) -> None:
     bad = np.flatnonzero(~np.isfinite(values.as_matrix()).all(axis=(-2, -1)))
     if bad.size:
         raise ValueError(
-            f"{path}: not written: {bad.size} of {len(keys)} poses are not finite, "
-            f"the first that of {keys[bad[0]].tolist()}"
+            f"{path}: not written: {bad.size} of {len(keys)} poses are not finite (the first"
+            f" is {keys[bad[0]].tolist()})"
         )
 
 
