@@ -78,8 +78,8 @@ def test_priors_with_an_offset_read_as_g2o_weighs_them(tmp_path):
     assert "PARAMS_SE3OFFSET 3" in saved.read_text()
     graph = posegraph.read_graph(str(saved), G2O_METRIC).graph
     assert len(graph.priors) == 2
-    # ½ φ × t with φ ~ 1e-3 leaves about 1e-4; a prior on O X, or weighed without moving its
-    # information to X, is 2e-3 to 3 off on these graphs.
+    # ½ φ × t with φ ~ 1e-3 leaves about 1e-4 (seeds 0-5); a prior on O X, or its information
+    # moved by Ad(O) or not moved, was 2e-3 to 26 off on those seeds, 3e-2 or more on this one.
     assert chi2(graph.values, graph.edges, graph.priors) == pytest.approx(
         _g2o_chi2(saved), rel=1e-3
     )
