@@ -86,15 +86,15 @@ def to_rows(
     widths: tuple[int, ...],
     id_columns: tuple[int, ...],
     checker: LineChecker,
-    information_values: int = 0,
+    without_information: frozenset[int] = frozenset(),
 ) -> Rows | None:
     """Convert the lines of one tag, checking token counts, numbers, finiteness and ids.
 
     ``widths`` are the accepted counts of numbers after the tag (several for dialects; an empty
-    tuple accepts any count ≥ 1, all ids); a line short of exactly ``information_values`` is
-    told that it lacks its information. Returns None when no line survives.
+    tuple accepts any count ≥ 1, all ids); a line with a count in ``without_information``
+    (``TagFormat.widths_without_information``) is told that it lacks its information. Returns
+    None when no line survives.
     """
-    without_information = {w - information_values for w in widths} if information_values else set()
     good: list[tuple[int, list[str]]] = []
     for number, tokens in entries:
         count = len(tokens) - 1

@@ -149,8 +149,7 @@ def _check_information(rows: Rows, measurements, information, checker: LineCheck
 def _pad_missing_information(entries: list, spec: TagFormat) -> list:
     """Lines that omit their information get zeros in its place (for identity_information, which
     replaces every information after parsing)."""
-    missing = spec.information_values
-    short = {w - missing for w in spec.widths} if missing else set()
+    short, missing = spec.widths_without_information, spec.information_values
     return [
         (number, tokens + ["0"] * missing if len(tokens) - 1 in short else tokens)
         for number, tokens in entries
@@ -252,7 +251,7 @@ def _prior_on_node(record: tuple, position: dict[float, int], offsets: SE3, chec
             f" offset, add 'PARAMS_SE3OFFSET {keys[k]:g} 0 0 0 0 0 0 1' before it, as g2o does)"
         ),
     )
-    used = offsets[np.array([position[key] for key in rows.numbers[:, 1].tolist()], dtype=int)]
+    used = offsets[np.array([position[key] for key in keys[~undefined].tolist()], dtype=int)]
     with np.errstate(all="ignore"):  # overflow is found by _finite
         moved = prior_without_offset(measurements[~undefined], information[~undefined], used)
         rows, (measurements, information) = _finite(rows, moved, checker)
@@ -318,7 +317,9 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
         spec = ALL_TAGS[tag]
         if options.identity_information:
             entries = _pad_missing_information(entries, spec)
-        rows = to_rows(tag, entries, spec.widths, spec.id_columns, checker, spec.information_values)
+        rows = to_rows(
+            tag, entries, spec.widths, spec.id_columns, checker, spec.widths_without_information
+        )
         if rows is not None:
             _convert(spec, rows, options, checker, collected)
     _apply_prior_offsets(collected, checker)

@@ -61,6 +61,12 @@ class TagFormat:
             return 0
         return self.group.dof * (self.group.dof + 1) // 2
 
+    @property
+    def widths_without_information(self) -> frozenset[int]:
+        """The counts of numbers of a line that leaves out exactly its information."""
+        missing = self.information_values
+        return frozenset(w - missing for w in self.widths) if missing else frozenset()
+
 
 # ------------------------------------------------------------------- information transforms
 def _g2o_faithful_scaling() -> np.ndarray:
