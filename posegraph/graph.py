@@ -137,10 +137,10 @@ class PoseGraph:
 
     def _elements(self, values, count: int, describe: Callable[[int], str]) -> LieGroup:
         """``count`` elements of the group from elements or (…, n, n) matrices (one is
-        broadcast). Elements must be finite and are otherwise taken as they are. Matrices are
-        normalised: rounding drift is projected away, but one whose linear block has determinant
-        ≤ 0, or that is off the group by more than 1e-4 (relative to its linear block), is
-        refused. A refusal is a ``ValueError`` naming ``describe(k)`` for the k-th."""
+        broadcast). Either is refused if it is not finite, if its linear block has determinant
+        ≤ 0 (a Sim3 of scale 0, say), or if it is off the group by more than 1e-4 (relative to its
+        linear block). Matrices are normalised: rounding drift is projected away; elements are
+        kept as they are. A refusal is a ``ValueError`` naming ``describe(k)`` for the k-th."""
         group, n = self.group, self.group.matrix_size
         element = isinstance(values, LieGroup)
         if element:
@@ -161,8 +161,6 @@ class PoseGraph:
         finite = np.isfinite(given).all(axis=(1, 2))
         if not finite.all():
             raise ValueError(f"{describe(int(np.flatnonzero(~finite)[0]))} is not finite")
-        if element:
-            return values
         corner, linear = given[:, -1, -1], given[:, :-1, :-1]
         determinant = np.linalg.det(linear)
         degenerate = np.flatnonzero(~(np.abs(corner - 1) <= 1e-4) | ~(determinant > 0))
@@ -185,7 +183,7 @@ class PoseGraph:
                 f"{describe(k)} is not an element of {group.__name__} (its matrix is off the "
                 f"group by {off[k]:.3g})"
             )
-        return normalized
+        return values if element else normalized
 
     # ------------------------------------------------------------------------ growth
     def add_nodes(self, node_ids, values: LieGroup | np.ndarray | None = None) -> np.ndarray:

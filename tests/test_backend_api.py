@@ -10,7 +10,7 @@ import posegraph
 from posegraph.benchmarks.incremental import stream
 from posegraph.factors import between_squares, linearize_between, linearize_priors
 from posegraph.graph import PoseGraph
-from posegraph.lie import SE2, SE3
+from posegraph.lie import SE2, SE3, Sim3
 from posegraph.linear import NormalEquations
 
 from .conftest import random_graph
@@ -97,6 +97,37 @@ def test_values_and_measurements_are_checked_where_they_are_given():
         graph.add_prior(6, np.full((4, 4), np.inf), np.eye(6))
     with pytest.raises(ValueError, match="a pose graph holds one of SE2, SE3, Sim3, not 'se3'"):
         PoseGraph("se3")
+
+
+def test_elements_are_checked_like_matrices_but_kept_as_given():
+    """A group element built from bad parts (a Sim3 of scale 0 or −1, a reflection, a sheared
+    rotation) is refused as its matrix would be; one within 1e-4 of the group is kept bit for
+    bit, not projected."""
+    graph = PoseGraph("Sim3")
+    cases = [
+        (Sim3(np.eye(3), np.zeros(3), np.array(0.0)), "determinant 0"),
+        (Sim3(np.eye(3), np.zeros(3), np.array(-1.0)), "determinant -1"),
+        (Sim3(np.diag([1.0, 1.0, -1.0]), np.zeros(3), np.array(2.0)), "determinant -8"),
+        (
+            Sim3(
+                np.array([[1.0, 0.1, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]),
+                np.zeros(3),
+                np.array(1.0),
+            ),
+            "off the group by 0.05",
+        ),
+    ]
+    for value, message in cases:
+        with pytest.raises(
+            ValueError, match=f"the value of node 3 is not an element of Sim3.*{message}"
+        ):
+            graph.add_node(3, value)
+    graph.add_nodes([1, 2])
+    with pytest.raises(ValueError, match="the measurement of the edge 1 → 2 is not an element"):
+        graph.add_edge(1, 2, cases[0][0], np.eye(7))
+    nearly = np.eye(3) + 1e-7
+    graph.add_node(3, Sim3(nearly, np.zeros(3), np.array(2.0)))
+    assert np.array_equal(graph.values.rotation[-1], nearly)
 
 
 def test_components_follow_every_edit():
