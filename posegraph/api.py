@@ -100,9 +100,8 @@ def optimize(
         init = "odometry" if robust else choose(graph)
     if init not in ("file", "warm start"):
         graph.set_values(initialize(graph, init))
-    elif not graph.initialized.all():
-        missing = graph.node_ids[~graph.initialized][:5].tolist()
-        raise ValueError(f"nodes {missing} have no values; add them with values or use init='auto'")
+    else:
+        graph.require_values("add them with values or use init='auto'")
     init_time = time.perf_counter() - start
 
     rejected = np.zeros(0, dtype=np.int64)

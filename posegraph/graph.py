@@ -21,6 +21,28 @@ from .lie import SE2, SE3, LieGroup, Sim3
 POSE_GROUPS: tuple[type[LieGroup], ...] = (SE2, SE3, Sim3)
 
 
+def node_id_array(node_ids: Iterable[int] | np.ndarray | int) -> np.ndarray:
+    """Node ids as a 1-D int64 array. Whole floats (ids loaded with ``numpy.loadtxt``) are
+    taken; anything else that is not an integer of at most 64 bits, or ids nested in more than
+    one dimension, is refused with a ``ValueError`` naming the first offending id."""
+    given = np.atleast_1d(np.asarray(node_ids))
+    if given.ndim != 1:
+        raise ValueError(f"node ids are one sequence of integers, not of shape {given.shape}")
+    kind = given.dtype.kind
+    if kind == "i":
+        whole = np.ones(given.shape, dtype=bool)
+    elif kind == "u":
+        whole = given < 2**63
+    elif kind == "f":
+        whole = (given == np.trunc(given)) & (-(2.0**63) <= given) & (given < 2.0**63)
+    else:
+        whole = np.array([type(k) is int and -(2**63) <= k < 2**63 for k in given.tolist()])
+    if not whole.all():
+        first = given[~whole].tolist()[0]
+        raise ValueError(f"node id {first!r} is not an integer of at most 64 bits")
+    return given.astype(np.int64)
+
+
 @dataclasses.dataclass(frozen=True, eq=False)
 class EdgeSet:
     """Stacked edges of one kind. For priors, ``j`` is unused and equals ``i``."""
@@ -115,7 +137,7 @@ class PoseGraph:
 
     def index(self, node_ids: Iterable[int] | np.ndarray | int) -> np.ndarray:
         """Indices of node ids; raises ``KeyError`` naming the first unknown id."""
-        ids = np.atleast_1d(np.asarray(node_ids, dtype=np.int64))
+        ids = node_id_array(node_ids)
         try:
             return np.fromiter((self._index_of[k] for k in ids.tolist()), np.int64, ids.size)
         except KeyError as error:
@@ -147,6 +169,12 @@ class PoseGraph:
             if not isinstance(values, group):
                 raise TypeError(
                     f"values are {type(values).__name__}, the graph is {group.__name__}"
+                )
+            if values.batch_shape not in ((), (count,)):
+                stacked = f" (or {count})" if count > 1 else ""
+                raise ValueError(
+                    f"{group.__name__} elements are one{stacked}, not of batch shape "
+                    f"{values.batch_shape}"
                 )
             values = values if values.batch_shape == (count,) else values.broadcast_to((count,))
             given = values.as_matrix()
@@ -193,7 +221,7 @@ class PoseGraph:
         initialised when the graph is optimised, by composing measurements from nodes that have
         values (as a back end adds a pose with only its odometry edge).
         """
-        ids = np.atleast_1d(np.asarray(node_ids, dtype=np.int64))
+        ids = node_id_array(node_ids)
         has_values = values is not None
         values = (
             self._elements(values, ids.size, lambda k: f"the value of node {ids[k]}")
@@ -255,6 +283,8 @@ class PoseGraph:
         """Measurements on nodes i → j, or priors on nodes i if ``j_ids`` is None."""
         i = self.index(i_ids)
         j = None if j_ids is None else self.index(j_ids)
+        if j is not None and i.size != j.size:
+            raise ValueError(f"edges need as many i as j ids, not {i.size} and {j.size}")
         ids = self.node_ids
 
         def on(k: int) -> str:
@@ -323,17 +353,43 @@ class PoseGraph:
         other.equivalences = self.equivalences[inside_pairs]
         return other
 
-    def remove_edges(self, edge_indices) -> None:
-        """Remove between edges by index (indices of later edges shift down)."""
-        keep = np.ones(self.num_edges, dtype=bool)
-        keep[np.asarray(edge_indices, dtype=np.int64)] = False
-        self.edges = self.edges.subset(keep)
+    def remove_edges(self, edges) -> None:
+        """Remove between edges given by index (negative ones count from the end) or where a
+        boolean mask over the edges holds; indices of later edges shift down."""
+        count = self.num_edges
+        given = np.asarray(edges)
+        if given.dtype == bool:
+            if given.shape != (count,):
+                raise ValueError(
+                    f"an edge mask has {count} entries, one per edge, not {given.shape}"
+                )
+            remove = given
+        else:
+            indices = np.atleast_1d(given)
+            if indices.ndim != 1 or (indices.size and indices.dtype.kind not in "iu"):
+                raise ValueError(
+                    f"edges are removed by integer indices or a boolean mask, not by {given.tolist()}"
+                )
+            outside = (indices < -count) | (indices >= count)
+            if outside.any():
+                raise ValueError(
+                    f"edge index {indices[outside][0]} is out of range: the graph has {count} edges"
+                )
+            remove = np.zeros(count, dtype=bool)
+            remove[indices.astype(np.int64)] = True
+        self.edges = self.edges.subset(~remove)
         self.structure_version += 1
 
     def fix(self, node_ids, fixed: bool = True) -> None:
         """Hold nodes at their current values (or release them with ``fixed=False``)."""
         self.fixed[self.index(node_ids)] = fixed
         self.structure_version += 1
+
+    def require_values(self, remedy: str) -> None:
+        """Raise ``ValueError`` naming (up to five) nodes added without a value, then ``remedy``."""
+        if not self.initialized.all():
+            missing = self.node_ids[~self.initialized][:5].tolist()
+            raise ValueError(f"nodes {missing} have no values; {remedy}")
 
     def set_values(self, values: LieGroup) -> None:
         """Replace all node values (batch shape (num_nodes,)); every node then has a value."""
@@ -381,15 +437,16 @@ class PoseGraph:
         Nodes marked fixed are held. A connected component with no fixed node and no prior
         has its lowest-id node held, which fixes its gauge (and, for Sim3, its scale).
         """
-        if self.num_nodes == 0:
-            return np.zeros(0, dtype=np.int64)
         labels = self.components()
-        anchored = np.zeros(labels.max() + 1 if labels.size else 0, dtype=bool)
+        anchored = np.zeros(labels.max(initial=-1) + 1, dtype=bool)
         anchored[labels[self.fixed]] = True
         anchored[labels[self.priors.i]] = True
         held = self.fixed.copy()
-        order = np.lexsort((self.node_ids, labels))
-        first_of_component = order[np.r_[True, labels[order][1:] != labels[order][:-1]]]
-        lowest = first_of_component[~anchored[labels[first_of_component]]]
-        held[lowest] = True
+        held[self.component_roots()[~anchored]] = True
         return np.flatnonzero(held)
+
+    def component_roots(self) -> np.ndarray:
+        """Index of the lowest-id node of each connected component, in label order."""
+        labels = self.components()
+        order = np.lexsort((self.node_ids, labels))
+        return order[np.diff(labels[order], prepend=-1) != 0]

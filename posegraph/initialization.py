@@ -91,9 +91,7 @@ def spanning_tree_values(
     i, j = graph.edges.i, graph.edges.j
     weights = edge_weights(graph, prefer)
 
-    labels = graph.components()
-    order = np.lexsort((graph.node_ids, labels))
-    first_of_component = order[np.r_[True, labels[order][1:] != labels[order][:-1]]]
+    first_of_component = graph.component_roots()
     root = n  # a virtual node joined to the known nodes and to every component's first node
     anchors = np.concatenate([np.flatnonzero(known), first_of_component])
     anchor_weights = np.concatenate(
@@ -108,7 +106,7 @@ def spanning_tree_values(
     # Keep the lightest edge of each pair before the spanning tree (duplicates would be summed).
     keep = np.lexsort((all_weights, cols, rows))
     pair = rows[keep] * (n + 1) + cols[keep]
-    keep = keep[np.r_[True, pair[1:] != pair[:-1]]]
+    keep = keep[np.diff(pair, prepend=-1) != 0]
     adjacency = scipy.sparse.coo_matrix(
         (all_weights[keep], (rows[keep], cols[keep])), shape=(n + 1, n + 1)
     ).tocsr()

@@ -222,7 +222,9 @@ class BlockPattern:
         return data[self.diagonal_positions]
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
-        """Solve with the last factorisation."""
+        """Solve with the last factorisation (an empty system's solution is empty)."""
+        if self.size == 0:
+            return np.zeros_like(rhs)
         return self.cholesky.solve(rhs)
 
     def scatter(self, solution: np.ndarray) -> np.ndarray:

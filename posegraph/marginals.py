@@ -49,7 +49,11 @@ def marginals(
     Returns (k, d, d) marginal blocks, or with ``joint=True`` the (k·d, k·d) joint covariance of
     the nodes together (for a pair, the 2d × 2d matrix with their cross-covariance).
     """
-    values = graph.values if values is None else values
+    if values is None:
+        graph.require_values("optimise the graph first (covariances are taken at its values)")
+        values = graph.values
+    elif values.batch_shape != (graph.num_nodes,):
+        raise ValueError(f"values are one per node ({graph.num_nodes}), not {values.batch_shape}")
     index = graph.index(nodes)
     system, _ = factorized_information(graph, values, linear_solver, for_covariance=True)
     if joint:

@@ -130,6 +130,78 @@ def test_elements_are_checked_like_matrices_but_kept_as_given():
     assert np.array_equal(graph.values.rotation[-1], nearly)
 
 
+def test_node_ids_are_whole_numbers_of_at_most_64_bits():
+    """Ids loaded as whole floats are taken; a fraction, a string, a boolean, an id beyond 64
+    bits or a nested list is refused by name rather than truncated or wrapped."""
+    graph = PoseGraph(SE2)
+    graph.add_nodes(np.array([3.0, 2.0**62]))
+    graph.add_nodes(np.array([2**63 - 1], dtype=np.uint64))
+    assert graph.node_ids.tolist() == [3, 2**62, 2**63 - 1]
+    assert graph.index([2**63 - 1]).tolist() == [2]
+    refused = [
+        ([0.5], "node id 0.5 is not an integer"),
+        (["a"], "node id 'a' is not an integer"),
+        ([True], "node id True is not an integer"),
+        ([2**63], "node id 9223372036854775808 is not an integer of at most 64 bits"),
+        ([-(2**70)], "node id -1180591620717411303424 is not"),
+        (np.array([2**64 - 1], dtype=np.uint64), "node id 18446744073709551615 is not"),
+        ([[4, 5]], r"node ids are one sequence of integers, not of shape \(1, 2\)"),
+    ]
+    for ids, message in refused:
+        with pytest.raises(ValueError, match=message):
+            graph.add_nodes(ids)
+        with pytest.raises(ValueError, match=message):
+            graph.index(ids)
+    assert graph.num_nodes == 3
+
+
+def test_edges_are_removed_by_index_or_mask_and_counts_must_agree():
+    graph = PoseGraph(SE2)
+    graph.add_nodes(range(5))
+    graph.add_edges([0, 1, 2, 3], [1, 2, 3, 4], SE2.identity(), np.eye(3))
+    graph.remove_edges(np.array([True, False, False, True]))
+    assert graph.edges.i.tolist() == [1, 2]
+    graph.remove_edges(-1)
+    assert graph.edges.i.tolist() == [1]
+    for edges, message in [
+        ([1], "edge index 1 is out of range: the graph has 1 edges"),
+        ([True, False], r"an edge mask has 1 entries, one per edge, not \(2,\)"),
+        ([0.0], r"integer indices or a boolean mask, not by \[0.0\]"),
+    ]:
+        with pytest.raises(ValueError, match=message):
+            graph.remove_edges(edges)
+    assert graph.num_edges == 1
+    with pytest.raises(ValueError, match="as many i as j ids, not 1 and 2"):
+        graph.add_edges([0], [1, 2], SE2.identity(), np.eye(3))
+    with pytest.raises(
+        ValueError, match=r"SE2 elements are one \(or 2\), not of batch shape \(3,\)"
+    ):
+        graph.add_edges([0, 1], [2, 3], SE2.identity((3,)), np.eye(3))
+    assert graph.num_edges == 1
+
+
+@pytest.mark.parametrize("group", [SE2, SE3, Sim3])
+def test_graphs_with_nothing_to_optimise(group):
+    """An empty graph, and graphs whose every node is held, end at once with every
+    initialisation and robust mode (the empty one raised IndexError in the spanning tree and
+    chordal's solve)."""
+    held = PoseGraph(group)
+    held.add_nodes([0, 1], group.identity((2,)))
+    held.add_edge(0, 1, group.exp(np.full(group.dof, 0.1)), np.eye(group.dof))
+    held.fix([0, 1])
+    single = PoseGraph(group)
+    single.add_node(4, group.identity())
+    for graph in (PoseGraph(group), held, single):
+        for init in ("auto", "file", "odometry", "spanning-tree", "chordal"):
+            result = posegraph.optimize(graph.copy(), init=init)
+            assert result.summary.termination == "nothing to optimise"
+        for robust in ("gnc", "huber"):
+            assert posegraph.optimize(graph.copy(), robust=robust).summary.converged
+    result = posegraph.optimize(held)
+    assert result.summary.final_error == pytest.approx(0.5 * 0.1**2 * group.dof)
+    assert posegraph.marginals(PoseGraph(group), []).shape == (0, group.dof, group.dof)
+
+
 def test_components_follow_every_edit():
     """``components`` is cached: each edit of nodes or edges must be seen."""
     graph = PoseGraph(SE2)
@@ -271,3 +343,10 @@ def test_marginals_are_blocks_of_the_inverse_information():
         np.testing.assert_allclose(
             posegraph.marginals(graph, nodes, linear_solver=backend), cov, rtol=1e-8
         )
+    np.testing.assert_allclose(posegraph.marginals(graph, nodes, values=graph.values), cov)
+    with pytest.raises(ValueError, match=r"values are one per node \(12\), not \(2,\)"):
+        posegraph.marginals(graph, nodes, values=graph.values[:2])
+    graph.add_node(99)  # no value until the graph is optimised again
+    graph.add_edge(int(graph.node_ids[0]), 99, SE3.identity(), np.eye(6))
+    with pytest.raises(ValueError, match=r"nodes \[99\] have no values; optimise the graph first"):
+        posegraph.marginals(graph, [99])
