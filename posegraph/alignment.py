@@ -11,11 +11,19 @@ import numpy as np
 from .lie import SE3, Sim3
 
 
-def umeyama(source: np.ndarray, target: np.ndarray, with_scale: bool = True) -> Sim3:
+def umeyama(
+    source: np.ndarray,
+    target: np.ndarray,
+    with_scale: bool = True,
+    names: tuple[str, str] = ("source", "target"),
+) -> Sim3:
     """The similarity (R, t, s) mapping ``source`` points (N, 3) onto ``target`` (N, 3).
 
     Umeyama eqs. 34–42: with the cross-covariance Σ = (1/N) Σₖ (yₖ − μ_y)(xₖ − μ_x)ᵀ = U D Vᵀ and
     S = diag(1, 1, det(U)det(V)): R = U S Vᵀ, s = tr(D S)/σ_x², t = μ_y − s R μ_x.
+    With scale, a point set with no spread (σ² ≤ 1e-24 of its mean square) is refused, naming
+    it by ``names``: s would be 0/0 for the source, and 0 for the target, which shrinks the
+    source onto one point and makes every error vanish.
     """
     source, target = np.asarray(source, float), np.asarray(target, float)
     if source.shape != target.shape or source.ndim != 2 or source.shape[1] != 3:
@@ -29,6 +37,15 @@ def umeyama(source: np.ndarray, target: np.ndarray, with_scale: bool = True) -> 
     sign = np.diag([1.0, 1.0, np.sign(np.linalg.det(u) * np.linalg.det(vt))])
     rotation = u @ sign @ vt
     variance = np.mean(np.sum(x * x, axis=1))
+    if with_scale:
+        for points, centered, name in ((source, x, names[0]), (target, y, names[1])):
+            if not np.mean(np.sum(centered**2, axis=1)) > 1e-24 * np.mean(
+                np.sum(points**2, axis=1)
+            ):
+                raise ValueError(
+                    f"the {name}'s {len(points)} positions are all at one point, so an alignment "
+                    "with scale (sim3) is undefined; align without scale (se3)"
+                )
     scale = float(np.trace(np.diag(d) @ sign) / variance) if with_scale else 1.0
     translation = mu_y - scale * rotation @ mu_x
     return Sim3(rotation, translation, scale)

@@ -127,7 +127,12 @@ def evaluate(
     if alignment == "none":
         transform = Sim3.identity()
     else:
-        transform = umeyama(est.translation, gt.translation, with_scale=alignment == "sim3")
+        transform = umeyama(
+            est.translation,
+            gt.translation,
+            with_scale=alignment == "sim3",
+            names=("estimate", "ground truth"),
+        )
     s = float(transform.scale)
     aligned = SE3(
         transform.rotation @ est.rotation,

@@ -87,3 +87,17 @@ def test_no_pairs_names_both_key_ranges():
         match=r"only 0 poses pair .* within 0\.02.* keys run from 0 to 9, the ground truth's run from 1305031102\.5 to 1305031111\.5",
     ):
         evaluate(ids, stamps)
+
+
+def test_a_scaled_alignment_refuses_a_trajectory_that_stays_at_one_point():
+    """Sim3 alignment onto a ground truth that stays at one point shrinks the estimate onto it
+    and reported an ATE of 0; a stationary estimate gave NaN. Both are refused by name; a rigid
+    alignment of the same pair is well defined (the ATE is the other side's spread)."""
+    moving = _trajectory(np.arange(10), seed=3)
+    still = Trajectory(moving.keys, SE3(moving.poses.rotation, np.full((10, 3), 2.5)))
+    for estimate, truth, name in ((still, moving, "estimate"), (moving, still, "ground truth")):
+        with pytest.raises(ValueError, match=f"the {name}'s 10 positions are all at one point"):
+            evaluate(estimate, truth, alignment="sim3")
+        spread = moving.poses.translation - moving.poses.translation.mean(axis=0)
+        rigid = evaluate(estimate, truth, alignment="se3")
+        assert rigid.ate.rmse == pytest.approx(np.sqrt(np.mean(np.sum(spread**2, axis=1))))
