@@ -36,12 +36,10 @@ def umeyama(
     u, d, vt = np.linalg.svd(covariance)
     sign = np.diag([1.0, 1.0, np.sign(np.linalg.det(u) * np.linalg.det(vt))])
     rotation = u @ sign @ vt
-    variance = np.mean(np.sum(x * x, axis=1))
+    variance = _mean_square(x)
     if with_scale:
         for points, centered, name in ((source, x, names[0]), (target, y, names[1])):
-            if not np.mean(np.sum(centered**2, axis=1)) > 1e-24 * np.mean(
-                np.sum(points**2, axis=1)
-            ):
+            if not _mean_square(centered) > 1e-24 * _mean_square(points):
                 raise ValueError(
                     f"the {name}'s {len(points)} positions are all at one point, so an alignment "
                     "with scale (sim3) is undefined; align without scale (se3)"
@@ -49,6 +47,11 @@ def umeyama(
     scale = float(np.trace(np.diag(d) @ sign) / variance) if with_scale else 1.0
     translation = mu_y - scale * rotation @ mu_x
     return Sim3(rotation, translation, scale)
+
+
+def _mean_square(points: np.ndarray) -> float:
+    """(1/N) Σₖ ‖pₖ‖² of (N, 3) points."""
+    return float(np.mean(np.sum(points * points, axis=1)))
 
 
 def as_se3(similarity: Sim3) -> SE3:

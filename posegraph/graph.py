@@ -368,7 +368,8 @@ class PoseGraph:
             indices = np.atleast_1d(given)
             if indices.ndim != 1 or (indices.size and indices.dtype.kind not in "iu"):
                 raise ValueError(
-                    f"edges are removed by integer indices or a boolean mask, not by {given.tolist()}"
+                    f"edges are removed by integer indices or a boolean mask, not by {given.dtype} "
+                    f"of shape {given.shape}"
                 )
             outside = (indices < -count) | (indices >= count)
             if outside.any():

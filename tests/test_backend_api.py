@@ -166,7 +166,7 @@ def test_edges_are_removed_by_index_or_mask_and_counts_must_agree():
     for edges, message in [
         ([1], "edge index 1 is out of range: the graph has 1 edges"),
         ([True, False], r"an edge mask has 1 entries, one per edge, not \(2,\)"),
-        ([0.0], r"integer indices or a boolean mask, not by \[0.0\]"),
+        ([0.0], r"integer indices or a boolean mask, not by float64 of shape \(1,\)"),
     ]:
         with pytest.raises(ValueError, match=message):
             graph.remove_edges(edges)
