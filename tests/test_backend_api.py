@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import copy
+import pickle
+
 import numpy as np
 import pytest
 from posegraph_datasets.generators import manhattan_world
@@ -277,6 +280,34 @@ def test_warm_starts_reuse_the_solution_and_then_the_structure():
     assert summaries[-1].final_error == pytest.approx(scratch, rel=1e-6)
     assert np.mean([s.num_iterations for s in summaries[1:]]) < np.mean(
         [summaries[0].num_iterations, 4]
+    )
+
+
+def test_an_optimised_graph_and_its_result_pickle_and_warm_start_alike():
+    """A back end checkpoints its graph, or hands it to another process, after optimising.
+    The CHOLMOD handles of the solver cache cannot be pickled, so they are left out: the copy
+    warm-starts from the same values to the same optimum, building its system anew."""
+    graph, _ = manhattan_world(num_poses=120, seed=86)
+    result = posegraph.optimize(graph)
+    copies = [pickle.loads(pickle.dumps(graph)), copy.deepcopy(graph)]
+    for restored in copies:
+        assert restored.last_result is None and restored.optimized
+        assert restored.values.same_as(graph.values)
+    np.testing.assert_array_equal(
+        pickle.loads(pickle.dumps(result)).values.as_matrix(), result.values.as_matrix()
+    )
+    assert copy.deepcopy(result).summary == result.summary
+    summaries = []
+    for g in [graph, *copies]:
+        last = int(g.node_ids[-1])
+        g.add_node(last + 1)
+        g.add_edge(last, last + 1, SE2.from_xytheta([1.0, 0.0, 0.0]), np.eye(3))
+        summaries.append(posegraph.optimize(g).summary)
+    assert all(s.initialization == "warm start" for s in summaries)
+    assert "sparsity pattern (grown)" in summaries[0].reused
+    assert not any(r.startswith("sparsity") for s in summaries[1:] for r in s.reused)
+    assert all(
+        s.final_error == pytest.approx(summaries[0].final_error, rel=1e-9) for s in summaries
     )
 
 

@@ -97,3 +97,8 @@ class Result:
     """The ``NormalEquations`` used (pattern and symbolic factorisation), for reuse."""
     linearization: object = dataclasses.field(default=None, repr=False, compare=False)
     """The residuals and Jacobians at ``values``, for reuse by a warm start."""
+
+    def __getstate__(self) -> dict:
+        """Pickled and deep-copied without ``system`` (its factorisation holds CHOLMOD handles
+        that cannot be pickled); a warm start from the copy builds the system anew."""
+        return {**self.__dict__, "system": None}
