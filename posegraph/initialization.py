@@ -36,8 +36,9 @@ def choose(graph: PoseGraph) -> str:
 def initialize(graph: PoseGraph, method: str) -> LieGroup:
     """Initial values by ``method``: "file" (the graph's values), "odometry" (compose the chain
     i → i+1, bridging breaks through other edges), "spanning-tree" (compose along the most
-    informative edges), "chordal" (``posegraph.chordal``) or "auto" (``choose``). Fixed nodes
-    keep their values."""
+    informative edges), "chordal" (``posegraph.chordal``) or "auto" (``choose``). The gauge
+    nodes (``PoseGraph.gauge_nodes``: fixed nodes, and the lowest id of each component without a
+    prior) keep their values, so that a map given away from the origin stays where it is."""
     if method == "auto":
         method = choose(graph)
     if method == "file":
@@ -47,7 +48,7 @@ def initialize(graph: PoseGraph, method: str) -> LieGroup:
 
         return chordal_values(graph)
     held = np.zeros(graph.num_nodes, dtype=bool)
-    held[graph.fixed] = True
+    held[graph.gauge_nodes()] = True
     prefer = {"odometry": "odometry", "spanning-tree": "information"}.get(method)
     if prefer is None:
         raise ValueError(

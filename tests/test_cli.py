@@ -159,6 +159,25 @@ def test_optimize_options(tmp_path):
     assert unknown.stderr.count("\n") == 1 and "node 99999" in unknown.stderr
 
 
+def test_a_map_away_from_the_origin_stays_where_the_file_has_it(tmp_path):
+    """Georeferenced odometry (a tree, so "auto" composes it) and a robust run on it: the first
+    pose is the gauge and keeps the file's value; it was moved to the origin."""
+    graph = tmp_path / "utm.g2o"
+    graph.write_text(
+        "VERTEX_SE2 0 500000.5 4000000.25 0.3\nVERTEX_SE2 1 500001 4000000 0.3\n"
+        "EDGE_SE2 0 1 1 0 0.1 1 0 0 1 0 1\n"
+    )
+    for extra in ([], ["--robust", "gnc"]):
+        run("optimize", graph, "-o", tmp_path / "out.g2o", "--overwrite", "--quiet", *extra)
+        out = read_graph(tmp_path / "out.g2o").graph
+        np.testing.assert_array_equal(
+            out.values[0].as_matrix(), read_graph(graph).graph.values[0].as_matrix()
+        )
+        assert out.positions()[1] == pytest.approx(
+            [500000.5 + np.cos(0.3), 4000000.25 + np.sin(0.3)]
+        )
+
+
 def test_a_closed_output_pipe_ends_quietly():
     """`posegraph info g.g2o | head -1`: no error line, no traceback, exit 1 (interrupted)."""
     read_end, write_end = os.pipe()
