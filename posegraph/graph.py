@@ -117,12 +117,12 @@ class PoseGraph:
         self.structure_version = 0
         """Incremented by every change that alters the sparsity pattern or the gauge."""
 
-    # ------------------------------------------------------------------------ queries
     def __getstate__(self) -> dict:
         """Pickled and deep-copied without ``last_result``: its factorisation holds CHOLMOD
         handles that cannot be pickled. A copy still warm-starts from its values."""
         return {**self.__dict__, "last_result": None}
 
+    # ------------------------------------------------------------------------ queries
     @property
     def num_nodes(self) -> int:
         return int(self.node_ids.shape[0])
