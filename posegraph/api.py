@@ -10,7 +10,13 @@ import numpy as np
 from .factors import between_squares, chi2
 from .gnc import gnc_tls
 from .graph import PoseGraph
-from .initialization import choose, initialize, odometry_mask, spanning_tree_values
+from .initialization import (
+    align_to_priors,
+    choose,
+    initialize,
+    odometry_mask,
+    spanning_tree_values,
+)
 from .robust import KERNELS, Robustifier, RobustKernel, default_width
 from .solvers import Callback, Result, SolverOptions
 from .solvers import optimize as solve
@@ -143,7 +149,7 @@ def _initialize_new_nodes(graph: PoseGraph, options: SolverOptions) -> None:
     solved = ~new[involved]
     local.fixed = solved
     local.priors = local.priors.subset(~solved[local.priors.i])
-    local.set_values(spanning_tree_values(local, known=solved))
+    local.set_values(align_to_priors(local, spanning_tree_values(local, known=solved)))
     # The local problem is small: SuperLU's start-up is cheaper than CHOLMOD's.
     local_options = dataclasses.replace(
         options, relative_decrease=LOCAL_RELATIVE_DECREASE, linear_solver="scipy"

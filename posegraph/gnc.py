@@ -31,10 +31,10 @@ import dataclasses
 
 import numpy as np
 
-from .chordal import chordal_values
 from .chordal import supports as supports_chordal
 from .factors import between_squares
 from .graph import PoseGraph
+from .initialization import initialize
 from .leverage import Leverage, deleted_residuals
 from .lie import LieGroup
 from .linear import NormalEquations
@@ -97,7 +97,7 @@ def _stages(graph, mask, width_sq, options, start: Result, restart: bool):
         if active is None or not np.array_equal(now_active, active):
             active = now_active
             system = NormalEquations(work, work.gauge_nodes(), options.linear_solver)
-        work.set_values(chordal_values(work) if restart else result.values)
+        work.set_values(initialize(work, "chordal") if restart else result.values)
         result = solve(work, stage, system=system)
         iterations += result.summary.num_iterations
         s = between_squares(result.values, graph.edges)
@@ -163,7 +163,7 @@ def _settle(graph, mask, kept, values, width_sq, options, restart: bool):
     for settle_pass in range(MAX_CONSISTENCY_PASSES):
         work = graph.with_edges(kept)
         if settle_pass == 0 and restart and supports_chordal(graph.group):
-            work.set_values(chordal_values(work))
+            work.set_values(initialize(work, "chordal"))
         else:
             work.set_values(values)
         result = solve(work, options)

@@ -12,6 +12,7 @@ import numpy as np
 import scipy.sparse
 import scipy.sparse.csgraph
 
+from .alignment import similarity_fit
 from .graph import PoseGraph
 from .lie import LieGroup
 
@@ -46,7 +47,7 @@ def initialize(graph: PoseGraph, method: str) -> LieGroup:
     if method == "chordal":
         from .chordal import chordal_values
 
-        return chordal_values(graph)
+        return align_to_priors(graph, chordal_values(graph))
     held = np.zeros(graph.num_nodes, dtype=bool)
     held[graph.gauge_nodes()] = True
     prefer = {"odometry": "odometry", "spanning-tree": "information"}.get(method)
@@ -54,7 +55,56 @@ def initialize(graph: PoseGraph, method: str) -> LieGroup:
         raise ValueError(
             f"unknown initialisation {method!r}; choose from {', '.join(INITIALIZERS)}"
         )
-    return spanning_tree_values(graph, known=held, prefer=prefer)
+    return align_to_priors(graph, spanning_tree_values(graph, known=held, prefer=prefer))
+
+
+def align_to_priors(graph: PoseGraph, values: LieGroup) -> LieGroup:
+    """``values`` with each component that has priors but no held node moved rigidly onto them,
+    Xₖ ← T Xₖ: a tree or chordal start leaves such a component at an arbitrary anchor, from
+    which Levenberg-Marquardt may not reach priors far away (UTM coordinates) or turned.
+
+    With priors weighing position at two or more distinct points, T is the weighted fit of the
+    component's positions to theirs (``similarity_fit`` without scale, weights tr(Ω_tt)/d), so a
+    GNSS track sets the heading. Otherwise T = Z X⁻¹ for the prior of largest tr Ω, or only the
+    shift onto its position if it weighs nothing but position.
+    """
+    priors = graph.priors
+    if len(priors) == 0:
+        return values
+    group, d = graph.group, graph.group.point_dim
+    labels = graph.components()
+    held = np.zeros(labels.max(initial=-1) + 1, dtype=bool)
+    held[labels[graph.gauge_nodes()]] = True
+    prior_labels = labels[priors.i]
+    position_weights = np.trace(priors.information[:, :d, :d], axis1=1, axis2=2) / d
+    other_weights = np.trace(priors.information[:, d:, d:], axis1=1, axis2=2)
+    for component in np.unique(prior_labels[~held[prior_labels]]):
+        mine = np.flatnonzero(prior_labels == component)
+        placed = mine[position_weights[mine] > 0]
+        targets = priors.measurements.translation[placed]
+        if placed.size >= 2 and np.ptp(targets, axis=0).max() > 1e-12 * np.abs(targets).max():
+            rotation, translation, _ = similarity_fit(
+                values.translation[priors.i[placed]], targets, position_weights[placed]
+            )
+            transform = _rigid(group, rotation, translation)
+        else:
+            k = mine[np.argmax(position_weights[mine] + other_weights[mine])]
+            value, measurement = values[priors.i[k]], priors.measurements[k]
+            if other_weights[k] > 0:
+                transform = measurement @ value.inverse()
+            else:
+                transform = _rigid(group, np.eye(d), measurement.translation - value.translation)
+        nodes = np.flatnonzero(labels == component)
+        values = values.set_at(nodes, transform @ values[nodes])
+    return values
+
+
+def _rigid(group: type[LieGroup], rotation: np.ndarray, translation: np.ndarray) -> LieGroup:
+    """The element p ↦ R p + t of ``group`` (of scale 1 for Sim3)."""
+    d = group.point_dim
+    matrix = np.eye(d + 1)
+    matrix[:d, :d], matrix[:d, d] = rotation, translation
+    return group.from_matrix(matrix)
 
 
 def odometry_mask(graph: PoseGraph) -> np.ndarray:

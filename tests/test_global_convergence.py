@@ -90,6 +90,81 @@ def test_auto_picks_chordal_for_loops_and_odometry_for_trees():
     assert posegraph.optimize(tree).summary.initialization == "odometry"
 
 
+def _gnss_track(group, heading: float, seed: int) -> tuple[PoseGraph, object]:
+    """200 poses driving a gentle S-curve that starts at UTM-like coordinates facing
+    ``heading``, with odometry and a position-only prior (σ = 1 m, no rotation information)
+    every 20 poses: GNSS fused with odometry, a tree with no loop closure."""
+    rng = np.random.default_rng(seed)
+    d = group.point_dim
+    start = np.eye(d + 1)
+    start[:2, :2] = [[np.cos(heading), -np.sin(heading)], [np.sin(heading), np.cos(heading)]]
+    start[:d, d] = [500000.0, 4000000.0, 100.0][:d]
+    steps = np.zeros((199, group.dof))
+    steps[:, 0] = 1.0
+    steps[:, d if d == 2 else 5] = 0.02 * np.sin(np.arange(1, 200) / 10)
+    truth = [group.from_matrix(start)]
+    for step in group.exp(steps):
+        truth.append(truth[-1] @ step)
+    truth = group.concatenate([t.broadcast_to((1,)) for t in truth])
+    graph = PoseGraph(group)
+    graph.add_nodes(np.arange(200))
+    odometry = truth[:-1].between(truth[1:]).retract(rng.normal(scale=0.01, size=(199, group.dof)))
+    graph.add_edges(np.arange(199), np.arange(1, 200), odometry, np.eye(group.dof) * 100.0)
+    gnss = np.arange(0, 200, 20)
+    fixes = np.tile(np.eye(d + 1), (gnss.size, 1, 1))
+    fixes[:, :d, d] = truth.translation[gnss] + rng.normal(scale=1.0, size=(gnss.size, d))
+    information = np.zeros((group.dof, group.dof))
+    information[:d, :d] = np.eye(d)
+    graph.add_priors(gnss, fixes, information)
+    return graph, truth
+
+
+@pytest.mark.parametrize("heading", [0.5, 1.5, 3.0])
+@pytest.mark.parametrize("group", [SE2, SE3], ids=lambda g: g.__name__)
+def test_a_gnss_track_far_from_the_origin_reaches_its_optimum(group, heading):
+    """Each initialiser started the track at the origin facing 0 (or, for chordal, at the first
+    fix facing its identity rotation), and Levenberg-Marquardt ended at errors up to 7e13 after
+    100 iterations. Moved onto the fixes, every initialiser and the robust mode reach the optimum
+    found from the true poses."""
+    graph, truth = _gnss_track(group, heading, seed=66)
+    from_truth = graph.copy()
+    from_truth.set_values(truth)
+    best = posegraph.optimize(from_truth, init="file").summary.final_error
+    for init in ("auto", "odometry", "spanning-tree", "chordal"):
+        summary = posegraph.optimize(graph.copy(), init=init).summary
+        assert summary.final_error == pytest.approx(best, rel=1e-6), init
+    assert posegraph.optimize(graph.copy(), robust="gnc").summary.final_error == pytest.approx(
+        best, rel=1e-6
+    )
+    # A back end's second session: its own component, added to an optimised graph.
+    first, second = graph.subgraph(np.arange(200) < 100), graph.subgraph(np.arange(200) >= 100)
+    posegraph.optimize(first)
+    ids = second.node_ids
+    first.add_nodes(ids)
+    first.add_edges(
+        ids[second.edges.i],
+        ids[second.edges.j],
+        second.edges.measurements,
+        second.edges.information,
+    )
+    first.add_priors(ids[second.priors.i], second.priors.measurements, second.priors.information)
+    two_sessions = first.copy()
+    two_sessions.set_values(truth)
+    best = posegraph.optimize(two_sessions, init="file").summary.final_error
+    summary = posegraph.optimize(first).summary
+    assert summary.initialization == "warm start"
+    assert summary.final_error == pytest.approx(best, rel=1e-6)
+
+
+def test_a_component_with_one_full_prior_is_placed_on_it():
+    graph = random_graph(SE3, 12, 4, seed=67, noise=0.02, priors=0)
+    measurement = SE3.exp(np.array([100.0, -50.0, 3.0, 0.3, -0.2, 2.5]))
+    graph.add_prior(graph.node_ids[5], measurement, np.eye(6))
+    for init in ("odometry", "chordal"):
+        values = initialize(graph, init)
+        np.testing.assert_allclose(values[5].as_matrix(), measurement.as_matrix(), atol=1e-9)
+
+
 def test_spanning_tree_prefers_informative_edges():
     """With a weak odometry edge, the spanning tree goes around it through a strong loop."""
     graph = PoseGraph(SE2)
