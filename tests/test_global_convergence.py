@@ -100,8 +100,8 @@ def _gnss_track(group, heading: float, seed: int) -> tuple[PoseGraph, object]:
     start[:2, :2] = [[np.cos(heading), -np.sin(heading)], [np.sin(heading), np.cos(heading)]]
     start[:d, d] = [500000.0, 4000000.0, 100.0][:d]
     steps = np.zeros((199, group.dof))
-    steps[:, 0] = 1.0
-    steps[:, d if d == 2 else 5] = 0.02 * np.sin(np.arange(1, 200) / 10)
+    steps[:, 0] = 1.0  # forward, turning by a yaw (θ of SE2, φ_z of SE3) that swings
+    steps[:, 2 if group is SE2 else 5] = 0.02 * np.sin(np.arange(1, 200) / 10)
     truth = [group.from_matrix(start)]
     for step in group.exp(steps):
         truth.append(truth[-1] @ step)
