@@ -131,6 +131,7 @@ SCHEMAS = {
             "components",
             "gauge",
             "condition_numbers",
+            "singular_information",
             "initial_error",
             "initial_chi2",
             "problems",
@@ -141,6 +142,7 @@ SCHEMAS = {
             "tag_counts": {"type": "object", "additionalProperties": {"type": "integer"}},
             "components": {"type": "array", "items": {"type": "integer"}},
             "condition_numbers": {"type": "object", "additionalProperties": _NUMBER},
+            "singular_information": {"type": "integer", "minimum": 0},
             "problems": {
                 "type": "array",
                 "items": {

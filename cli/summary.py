@@ -55,11 +55,17 @@ def format_diagnosis(d: Diagnosis) -> str:
         f"  components      {len(d.components)} (sizes {', '.join(map(str, d.components[:5]))})",
         f"  gauge           {d.gauge}",
     ]
+    kinds = []
+    if d.singular_information:
+        kinds.append(f"{d.singular_information} singular (directions not measured)")
     if d.condition_numbers:
         c = d.condition_numbers
-        lines.append(
-            f"  information     SPD; condition number min {c['min']:.3g}, median {c['median']:.3g}, max {c['max']:.3g}"
+        kinds.append(
+            f"{'the others ' if kinds else ''}SPD, condition number min {c['min']:.3g}, "
+            f"median {c['median']:.3g}, max {c['max']:.3g}"
         )
+    if kinds:
+        lines.append(f"  information     {'; '.join(kinds)}")
     lines.append(f"  initial error   {d.initial_error:.10g} (½Σrᵀ Ω r), chi2 {d.initial_chi2:.10g}")
     if d.problems:
         lines.append(f"  problems        {len(d.problems)}")

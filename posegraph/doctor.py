@@ -41,7 +41,10 @@ class Diagnosis:
     """Node count of every connected component, largest first."""
     gauge: str
     condition_numbers: dict[str, float]
-    """min, median and max condition number of the information matrices."""
+    """min, median and max condition number of the information matrices that are not singular."""
+    singular_information: int
+    """How many information matrices are singular (λ_min ≤ 1e-12 λ_max): directions not
+    measured, as by a position-only prior."""
     initial_error: float
     initial_chi2: float
     problems: list[Problem]
@@ -77,7 +80,17 @@ def diagnose(read: ReadResult) -> Diagnosis:
         gauge = f"lowest id held: node {', '.join(map(str, graph.node_ids[held][:10].tolist()))}"
 
     information = np.concatenate([graph.edges.information, graph.priors.information])
-    condition = np.linalg.cond(information) if len(information) else np.zeros(0)
+    eigenvalues = np.linalg.eigvalsh(information) if len(information) else np.zeros((0, 1))
+    singular = eigenvalues[:, 0] <= 1e-12 * eigenvalues[:, -1]
+    singular_edges = int(np.count_nonzero(singular[: graph.num_edges]))
+    if singular_edges:
+        problems.append(
+            Problem(
+                f"{singular_edges} edge(s) have singular information: directions they do not measure",
+                "fine for partial measurements, if the rest of the graph constrains those directions",
+            )
+        )
+    condition = eigenvalues[~singular, -1] / eigenvalues[~singular, 0]
     conditions = {}
     if condition.size:
         conditions = {
@@ -169,6 +182,7 @@ def diagnose(read: ReadResult) -> Diagnosis:
         components=sizes,
         gauge=gauge,
         condition_numbers=conditions,
+        singular_information=int(np.count_nonzero(singular)),
         initial_error=0.5 * total,
         initial_chi2=total,
         problems=problems,

@@ -43,6 +43,31 @@ def node_id_array(node_ids: Iterable[int] | np.ndarray | int) -> np.ndarray:
     return given.astype(np.int64)
 
 
+def information_problems(information: np.ndarray) -> tuple[np.ndarray, Callable[[int], str]]:
+    """Which of (n, d, d) information matrices are refused, and why the k-th is: not finite,
+    not symmetric (|Ω − Ωᵀ| > 1e-9 max|Ω|), zero, or not positive semi-definite
+    (λ_min < −1e-9 max|Ω|). A zero eigenvalue is a direction not measured, as in a
+    position-only prior, and is allowed."""
+    with np.errstate(invalid="ignore"):
+        size = np.abs(information).max(axis=(1, 2))  # NaN or ∞ where an entry is
+        asymmetry = np.abs(information - np.swapaxes(information, 1, 2)).max(axis=(1, 2))
+    symmetric = np.isfinite(size) & (asymmetry <= 1e-9 * size)
+    smallest = np.full(len(information), np.nan)  # fails every comparison where not symmetric
+    smallest[symmetric] = np.linalg.eigvalsh(information[symmetric])[:, 0]
+    bad = ~(smallest >= -1e-9 * size) | (size == 0)
+
+    def why(k: int) -> str:
+        if not np.isfinite(size[k]):
+            return "not finite"
+        if not symmetric[k]:
+            return "not symmetric"
+        if size[k] == 0:
+            return "zero (it would weigh nothing)"
+        return f"not positive semi-definite (λ_min = {smallest[k]:.3g})"
+
+    return bad, why
+
+
 @dataclasses.dataclass(frozen=True, eq=False)
 class EdgeSet:
     """Stacked edges of one kind. For priors, ``j`` is unused and equals ``i``."""
@@ -266,22 +291,10 @@ class PoseGraph:
                 f"not of shape {information.shape}"
             )
         information = np.broadcast_to(information, (count, d, d)).copy()
-        with np.errstate(invalid="ignore"):
-            size = np.abs(information).max(axis=(1, 2))  # NaN or ∞ where an entry is
-            asymmetry = np.abs(information - np.swapaxes(information, 1, 2)).max(axis=(1, 2))
-        symmetric = np.isfinite(size) & (asymmetry <= 1e-9 * size)
-        smallest = np.full(count, np.nan)  # fails every comparison where not symmetric
-        smallest[symmetric] = np.linalg.eigvalsh(information[symmetric])[:, 0]
-        bad = np.flatnonzero(~(smallest >= -1e-9 * size))
-        if bad.size:
-            k = int(bad[0])
-            if not np.isfinite(size[k]):
-                what = "not finite"
-            elif not symmetric[k]:
-                what = "not symmetric"
-            else:
-                what = f"not positive semi-definite (λ_min = {smallest[k]:.3g})"
-            raise ValueError(f"{describe(k)} is {what}")
+        bad, why = information_problems(information)
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            raise ValueError(f"{describe(k)} is {why(k)}")
         return information
 
     def _edge_set(self, i_ids, j_ids, measurements, information) -> EdgeSet:

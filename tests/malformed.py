@@ -36,16 +36,16 @@ MALFORMED = [
     ),
     ("infinite-value", "VERTEX_SE2 0 inf 0 0\n", 1, "NaN or infinite"),
     (
-        "information-not-positive-definite",
+        "information-not-positive-semi-definite",
         V0 + V1 + "EDGE_SE2 0 1 1 0 0 -1 0 0 1 0 1\n",
         3,
-        "not positive definite",
+        "not positive semi-definite (λ_min = -1)",
     ),
     (
         "information-all-zero",
         V0 + V1 + "EDGE_SE2 0 1 1 0 0 0 0 0 0 0 0\n",
         3,
-        "not positive definite",
+        "information matrix is zero (it would weigh nothing)",
     ),
     (
         "edge-to-unknown-vertex",
@@ -126,10 +126,10 @@ MALFORMED = [
     ),
     ("equiv-unknown-node", "VERTEX2 0 0 0 0\nVERTEX2 1 1 0 0\nEQUIV 0 4\n", 3, "refers to node 4"),
     (
-        "toro-information-not-positive-definite",
-        "VERTEX2 0 0 0 0\nVERTEX2 1 1 0 0\nEDGE2 0 1 1 0 0 1 0 1 0 0 0\n",
+        "toro-information-not-positive-semi-definite",
+        "VERTEX2 0 0 0 0\nVERTEX2 1 1 0 0\nEDGE2 0 1 1 0 0 1 0 1 -1 0 0\n",
         3,
-        "not positive definite",
+        "not positive semi-definite",
     ),
     (
         "edge2-information-in-g2o-order",

@@ -244,6 +244,26 @@ def test_info_reports_problems_with_suggestions(tmp_path):
     assert "→" in text  # every problem comes with a suggestion
 
 
+def test_info_counts_singular_information_and_flags_it_only_on_edges(tmp_path):
+    """GNSS fixes without rotation information are singular by design: counted, not flagged
+    (they were "condition number above 1e12"); a between edge that measures no rotation is
+    flagged with what to check."""
+    path = tmp_path / "gnss.g2o"
+    odometry = "".join(f"EDGE_SE2 {k} {k + 1} 1 0 0.05 100 0 0 100 0 1000\n" for k in range(20))
+    fixes = "".join(f"EDGE_PRIOR_SE2 {k} {k} 3 0 1 0 0 1 0 0\n" for k in (0, 10, 20))
+    path.write_text(odometry + fixes)
+    document = run_json("info", path)
+    assert document["singular_information"] == 3
+    assert document["condition_numbers"] == {"min": 10.0, "median": 10.0, "max": 10.0}
+    assert document["problems"][0]["what"] == "21 node(s) have no vertex line"
+    assert len(document["problems"]) == 1
+    text = run("info", path).stdout
+    assert "3 singular (directions not measured); the others SPD, condition number min 10" in text
+    path.write_text(odometry + fixes + "EDGE_SE2 0 20 19 3 0 1 0 0 1 0 0\n")
+    problems = [p["what"] for p in run_json("info", path)["problems"]]
+    assert "1 edge(s) have singular information: directions they do not measure" in problems
+
+
 def test_convert_between_formats(tmp_path):
     toro, back = tmp_path / "g.graph", tmp_path / "back.g2o"
     assert run_json("convert", EXAMPLE_2D, toro)["format"] == "toro"

@@ -228,7 +228,8 @@ def test_g2o_rotation_information_option(tmp_path):
 
 EDGE2_INFORMATION = np.array([[4.0, 1.0, 0.5], [1.0, 9.0, 2.0], [0.5, 2.0, 16.0]])
 EDGE2_VALUES = {"toro": "4 1 9 16 0.5 2", "g2o": "4 1 0.5 9 2 16"}
-"""EDGE2_INFORMATION written in each order; neither text is positive definite in the other."""
+"""EDGE2_INFORMATION written in each order; neither text is positive semi-definite in the
+other."""
 
 
 @pytest.mark.parametrize("order", ["toro", "g2o"])
@@ -241,13 +242,13 @@ def test_edge2_information_in_either_order(order, tmp_path):
     with pytest.raises(GraphFileError) as raised:
         read_graph(str(path), ReadOptions(edge2_order=other))
     message = str(raised.value)
-    assert message.startswith(f"{path}:3: EDGE2: information matrix is not positive definite")
+    assert message.startswith(f"{path}:3: EDGE2: information matrix is not positive semi-definite")
     assert f"read it with --edge2-order {order} (ReadOptions(edge2_order='{order}'))" in message
 
 
-def test_edge2_order_gives_no_advice_when_neither_order_is_positive_definite(tmp_path):
+def test_edge2_order_gives_no_advice_when_neither_order_is_positive_semi_definite(tmp_path):
     path = tmp_path / "e.graph"
-    path.write_text("VERTEX2 0 0 0 0\nVERTEX2 1 1 0 0\nEDGE2 0 1 1 0 0 1 0 1 0 0 0\n")
+    path.write_text("VERTEX2 0 0 0 0\nVERTEX2 1 1 0 0\nEDGE2 0 1 1 0 0 1 0 1 -1 0 0\n")
     with pytest.raises(GraphFileError) as raised:
         read_graph(str(path))
     assert "--edge2-order" not in str(raised.value)
@@ -350,6 +351,53 @@ def test_nodes_without_vertices_follow_the_odometry_chain(tmp_path):
         edge = np.flatnonzero((chain.i == k) & (chain.j == k + 1))[0]
         expected = expected @ chain.measurements[edge]
         np.testing.assert_allclose(values[k + 1].as_matrix(), expected.as_matrix(), atol=1e-12)
+
+
+@pytest.mark.parametrize("group", [SE2, SE3], ids=lambda g: g.__name__)
+def test_position_only_priors_are_read_back(group, tmp_path):
+    """A prior whose information is singular (a GNSS fix: no rotation information) is what the
+    library accepts; the reader refused it ("not positive definite, λ_min = 0"), so such a graph
+    could be written but not read back. A zero matrix, or a negative eigenvalue, is refused."""
+    graph = random_graph(group, 6, 0, seed=57, priors=0)
+    d = group.point_dim
+    information = np.zeros((group.dof, group.dof))
+    information[:d, :d] = np.diag(np.arange(1.0, d + 1))
+    graph.add_priors(graph.node_ids[[0, 3]], graph.values[[0, 3]], information)
+    path = tmp_path / "gnss.g2o"
+    write_graph(graph, str(path))
+    back = read_graph(str(path)).graph
+    np.testing.assert_allclose(back.priors.information, graph.priors.information, atol=1e-12)
+    tag = "EDGE_PRIOR_SE2" if group is SE2 else "EDGE_SE3_PRIOR"
+    text = path.read_text()
+    prior_line = next(line for line in text.splitlines() if line.startswith(tag))
+    count = {SE2: 6, SE3: 21}[group]  # information values at the end of the line
+    kept = prior_line.split()[:-count]
+    zero, negative = [0.0] * count, [-1.0] + [0.0] * (count - 1)
+    for values, message in [
+        (zero, r"information matrix is zero \(it would weigh nothing\)"),
+        (negative, r"information matrix is not positive semi-definite \(λ_min = -1\)"),
+    ]:
+        path.write_text(text.replace(prior_line, " ".join(kept + [str(v) for v in values])))
+        with pytest.raises(GraphFileError, match=message):
+            read_graph(str(path))
+
+
+def test_a_file_without_vertices_is_composed_onto_its_fixes(tmp_path):
+    """Odometry and GNSS fixes far from the origin, with no vertex lines: the composed values
+    (what ``info`` measures the initial error at) are placed on the fixes."""
+    path = tmp_path / "gnss.g2o"
+    odometry = "".join(f"EDGE_SE2 {k} {k + 1} 1 0 0.05 100 0 0 100 0 1000\n" for k in range(30))
+    path.write_text(
+        odometry
+        + "EDGE_PRIOR_SE2 0 500000 4000000 0 1 0 0 1 0 0\n"
+        + "EDGE_PRIOR_SE2 30 499990 4000020 0 1 0 0 1 0 0\n"
+    )
+    graph = read_graph(str(path)).graph
+    spread = np.linalg.norm(
+        graph.positions([0, 30]) - [[500000, 4000000], [499990, 4000020]], axis=1
+    )
+    assert spread.max() < 5.0  # the chain is curved, the fixes are not its ends exactly
+    assert chi2(graph.values, graph.edges, graph.priors) < 100.0
 
 
 def test_broken_chain_is_bridged_by_other_edges(tmp_path):

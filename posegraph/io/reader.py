@@ -7,8 +7,8 @@ from collections import Counter
 
 import numpy as np
 
-from ..graph import PoseGraph
-from ..initialization import spanning_tree_values
+from ..graph import PoseGraph, information_problems
+from ..initialization import align_to_priors, spanning_tree_values
 from ..lie import SE3, Sim3
 from ..lifting import default_scale_information, lift_information, lift_se3
 from .errors import GraphFileError
@@ -117,11 +117,10 @@ def _lift_se3_records(collected: _Collected, scale_information: float | None) ->
 
 
 def _edge2_order_advice(rows: Rows, order: str) -> str:
-    """Advice for EDGE2 lines that are not positive definite in ``order``: whether every one of
-    them is in the other order (files of both kinds exist)."""
+    """Advice for EDGE2 lines whose information is refused in ``order``: whether every one of
+    them is accepted in the other order (files of both kinds exist)."""
     other = next(name for name in EDGE2_ORDERS if name != order)
-    information = edge2_information(rows.numbers[:, 5:11], other)
-    if not (np.linalg.eigvalsh(information)[:, 0] > 0).all():
+    if information_problems(edge2_information(rows.numbers[:, 5:11], other))[0].any():
         return ""
     return (
         f" in the {order} order ({edge2_order_text(order)}); every EDGE2 line of this file is"
@@ -131,18 +130,11 @@ def _edge2_order_advice(rows: Rows, order: str) -> str:
 
 
 def _check_information(rows: Rows, measurements, information, checker: LineChecker, options):
-    smallest = np.linalg.eigvalsh(information)[:, 0]
-    bad = ~(smallest > 0)
+    bad, why = information_problems(information)
     if not bad.any():
         return rows, measurements, information
     advice = _edge2_order_advice(rows, options.edge2_order) if rows.tag == "EDGE2" else ""
-    kept = checker.keep_good(
-        rows,
-        bad,
-        lambda k: (
-            f"information matrix is not positive definite (λ_min = {smallest[k]:.3g}){advice}"
-        ),
-    )
+    kept = checker.keep_good(rows, bad, lambda k: f"information matrix is {why(k)}{advice}")
     return kept, measurements[~bad], information[~bad]
 
 
@@ -389,7 +381,7 @@ def _assemble(group, collected: _Collected, checker: LineChecker):
         pairs = np.stack([rows.ids(0)[kept], rows.ids(1)[kept]], axis=1)
         graph.equivalences = np.concatenate([graph.equivalences, pairs])
     if without_vertex.size:
-        graph.set_values(spanning_tree_values(graph))
+        graph.set_values(align_to_priors(graph, spanning_tree_values(graph)))
     return graph, without_vertex
 
 
