@@ -279,9 +279,8 @@ class PoseGraph:
         return int(self.add_nodes([node_id], value)[0])
 
     def _information(self, information, count: int, describe: Callable[[int], str]) -> np.ndarray:
-        """(count, d, d) information from one (d, d) or (count, d, d). Each must be finite,
-        symmetric and positive semi-definite (a zero eigenvalue is a direction not measured);
-        else ``ValueError`` names ``describe(k)`` for the k-th."""
+        """(count, d, d) information from one (d, d) or (count, d, d), each passing
+        ``information_problems``; else ``ValueError`` names ``describe(k)`` for the k-th."""
         d = self.group.dof
         information = np.asarray(information, float)
         if information.shape not in ((d, d), (count, d, d)):
