@@ -1,7 +1,9 @@
 """Figures of pose graphs and trajectories (matplotlib's Agg backend: works headless).
 
 Odometry (edges between consecutive nodes) is drawn as the trajectory line; loop closures as
-thin lines of a lighter shade. Several inputs are overlaid, one colour each (before/after).
+thin lines of a lighter shade; priors (GNSS fixes, say) as crosses at their measured positions.
+Several inputs are overlaid, one colour each (before/after); priors shared with an earlier input
+are drawn once.
 SE2 graphs are drawn top-down; SE3 and Sim3 in 3D (or top-down with ``view="top"``).
 """
 
@@ -98,19 +100,18 @@ def plot_graphs(
     """Overlay pose graphs (label, graph) in one figure written to ``path``."""
     three_d = view == "3d" or (view == "auto" and any(g.group is not SE2 for _, g in graphs))
     figure, axes = _new_axes(three_d)
+    drawn_priors: list[np.ndarray] = []
     for k, (label, graph) in enumerate(graphs):
+        color = COLORS[k % len(COLORS)]
         positions = as_se3(graph.values).translation
         loop = ~odometry_mask(graph)
         loops = _segments(positions, graph.edges.i[loop], graph.edges.j[loop])
         count = int(loop.sum())
-        _draw(
-            axes,
-            three_d,
-            positions,
-            loops,
-            COLORS[k % len(COLORS)],
-            f"{label} ({count} loop closures)",
-        )
+        _draw(axes, three_d, positions, loops, color, f"{label} ({count} loop closures)")
+        fixes = as_se3(graph.priors.measurements).translation[:, : 3 if three_d else 2]
+        if len(fixes) and not any(np.array_equal(fixes, other) for other in drawn_priors):
+            axes.scatter(*fixes.T, marker="x", color=color, label=f"{len(fixes)} priors")
+            drawn_priors.append(fixes)
     _finish(figure, axes, three_d, title, path)
 
 

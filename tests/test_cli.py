@@ -290,6 +290,30 @@ def test_plot_overlays_graphs(tmp_path):
     assert_not_blank(tmp_path / "top.png")
 
 
+def test_plots_mark_priors_once_per_distinct_set(tmp_path, monkeypatch):
+    """GNSS fixes are drawn as crosses at their measured positions; an optimised copy that
+    shares them does not draw them again."""
+    from matplotlib.collections import PathCollection
+
+    from posegraph import plotting
+
+    before = read_graph(EXAMPLE_2D).graph
+    fixes = before.values[[0, 100, 200]]
+    information = np.diag([1.0, 1.0, 0.0])
+    before.add_priors(before.node_ids[[0, 100, 200]], fixes, information)
+    after, other = before.copy(), before.copy()
+    other.add_prior(before.node_ids[300], before.values[300], information)
+    figures = []
+    monkeypatch.setattr(plotting, "save_figure", lambda figure, path: figures.append(figure))
+    plotting.plot_graphs([("initial", before), ("optimised", after), ("other", other)], "x.png")
+    axes = figures[0].axes[0]
+    labels = [text.get_text() for text in axes.get_legend().get_texts()]
+    assert labels.count("3 priors") == 1 and labels.count("4 priors") == 1
+    crosses = [c.get_offsets() for c in axes.collections if isinstance(c, PathCollection)]
+    np.testing.assert_array_equal(crosses[0], fixes.translation)
+    assert len(crosses) == 2 and len(crosses[1]) == 4
+
+
 def test_eval_reports_ate_and_rpe(tmp_path):
     from posegraph_datasets.generators import sphere
 
