@@ -53,20 +53,12 @@ def _blocks(group: type[LieGroup], information: np.ndarray):
 def _anchors(graph: PoseGraph) -> tuple[np.ndarray, LieGroup]:
     """One held node per component at least: the gauge nodes at their values, plus a node of
     every component that only has priors, at its prior's measurement."""
-    held = graph.gauge_nodes()
-    values = graph.values[held]
-    if len(graph.priors):
-        labels = graph.components()
-        anchored = np.zeros(labels.max() + 1, dtype=bool)
-        anchored[labels[held]] = True
-        first_prior = {}
-        for k, node in enumerate(graph.priors.i.tolist()):
-            if not anchored[labels[node]] and labels[node] not in first_prior:
-                first_prior[labels[node]] = k
-        if first_prior:
-            priors = np.array(sorted(first_prior.values()))
-            held = np.concatenate([held, graph.priors.i[priors]])
-            values = graph.group.concatenate([values, graph.priors.measurements[priors]])
+    gauge = graph.gauge_nodes()
+    prior_labels = graph.components()[graph.priors.i]
+    candidates = np.flatnonzero(graph.components_set_by_priors()[prior_labels])
+    first = np.sort(candidates[np.unique(prior_labels[candidates], return_index=True)[1]])
+    held = np.concatenate([gauge, graph.priors.i[first]])
+    values = graph.group.concatenate([graph.values[gauge], graph.priors.measurements[first]])
     return held, values
 
 

@@ -455,13 +455,22 @@ class PoseGraph:
         Nodes marked fixed are held. A connected component with no fixed node and no prior
         has its lowest-id node held, which fixes its gauge (and, for Sim3, its scale).
         """
-        labels = self.components()
-        anchored = np.zeros(labels.max(initial=-1) + 1, dtype=bool)
-        anchored[labels[self.fixed]] = True
-        anchored[labels[self.priors.i]] = True
+        free = ~self._components_holding(self.fixed) & ~self._components_holding(self.priors.i)
         held = self.fixed.copy()
-        held[self.component_roots()[~anchored]] = True
+        held[self.component_roots()[free]] = True
         return np.flatnonzero(held)
+
+    def components_set_by_priors(self) -> np.ndarray:
+        """Per component label, whether its priors set its gauge: it has priors and no fixed
+        node, so no node of it is held."""
+        return self._components_holding(self.priors.i) & ~self._components_holding(self.fixed)
+
+    def _components_holding(self, nodes: np.ndarray) -> np.ndarray:
+        """Per component label, whether the component holds one of ``nodes`` (indices or mask)."""
+        labels = self.components()
+        holding = np.zeros(labels.max(initial=-1) + 1, dtype=bool)
+        holding[labels[nodes]] = True
+        return holding
 
     def component_roots(self) -> np.ndarray:
         """Index of the lowest-id node of each connected component, in label order."""

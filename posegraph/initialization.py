@@ -73,12 +73,10 @@ def align_to_priors(graph: PoseGraph, values: LieGroup) -> LieGroup:
         return values
     group, d = graph.group, graph.group.point_dim
     labels = graph.components()
-    held = np.zeros(labels.max(initial=-1) + 1, dtype=bool)
-    held[labels[graph.gauge_nodes()]] = True
     prior_labels = labels[priors.i]
     position_weights = np.trace(priors.information[:, :d, :d], axis1=1, axis2=2) / d
     other_weights = np.trace(priors.information[:, d:, d:], axis1=1, axis2=2)
-    for component in np.unique(prior_labels[~held[prior_labels]]):
+    for component in np.flatnonzero(graph.components_set_by_priors()):
         mine = np.flatnonzero(prior_labels == component)
         placed = mine[position_weights[mine] > 0]
         targets = priors.measurements.translation[placed]
