@@ -124,7 +124,7 @@ def _edge2_order_advice(rows: Rows, order: str) -> str:
         return ""
     return (
         f" in the {order} order ({edge2_order_text(order)}); every EDGE2 line of this file is"
-        f" positive definite in the {other} order ({edge2_order_text(other)}): read it with"
+        f" positive semi-definite in the {other} order ({edge2_order_text(other)}): read it with"
         f" --edge2-order {other} (ReadOptions(edge2_order={other!r}))"
     )
 
