@@ -81,3 +81,32 @@ def union(first: PoseGraph, second: PoseGraph, id_offset: int) -> PoseGraph:
 
 
 POSE_GROUPS = [SE2, SE3, Sim3]
+
+
+def gnss_track(group, heading: float, seed: int) -> tuple[PoseGraph, LieGroup]:
+    """200 poses driving a gentle S-curve that starts at UTM-like coordinates facing
+    ``heading``, with odometry and a position-only prior (σ = 1 m, no rotation information)
+    every 20 poses: GNSS fused with odometry, a tree with no loop closure."""
+    rng = np.random.default_rng(seed)
+    d = group.point_dim
+    start = np.eye(d + 1)
+    start[:2, :2] = [[np.cos(heading), -np.sin(heading)], [np.sin(heading), np.cos(heading)]]
+    start[:d, d] = [500000.0, 4000000.0, 100.0][:d]
+    steps = np.zeros((199, group.dof))
+    steps[:, 0] = 1.0  # forward, turning by a yaw (θ of SE2, φ_z of SE3) that swings
+    steps[:, 2 if group is SE2 else 5] = 0.02 * np.sin(np.arange(1, 200) / 10)
+    truth = [group.from_matrix(start)]
+    for step in group.exp(steps):
+        truth.append(truth[-1] @ step)
+    truth = group.concatenate([t.broadcast_to((1,)) for t in truth])
+    graph = PoseGraph(group)
+    graph.add_nodes(np.arange(200))
+    odometry = truth[:-1].between(truth[1:]).retract(rng.normal(scale=0.01, size=(199, group.dof)))
+    graph.add_edges(np.arange(199), np.arange(1, 200), odometry, np.eye(group.dof) * 100.0)
+    gnss = np.arange(0, 200, 20)
+    fixes = np.tile(np.eye(d + 1), (gnss.size, 1, 1))
+    fixes[:, :d, d] = truth.translation[gnss] + rng.normal(scale=1.0, size=(gnss.size, d))
+    information = np.zeros((group.dof, group.dof))
+    information[:d, :d] = np.eye(d)
+    graph.add_priors(gnss, fixes, information)
+    return graph, truth

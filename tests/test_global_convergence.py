@@ -20,7 +20,7 @@ from posegraph.lie import SE2, SE3, Sim3
 from posegraph.robust import KERNELS, RobustKernel, default_width, tls_gnc_weights
 from posegraph.trajectory_io import Trajectory, as_se3
 
-from .conftest import random_graph, union
+from .conftest import gnss_track, random_graph, union
 
 
 def _noise_free(graph: PoseGraph, truth) -> PoseGraph:
@@ -90,35 +90,6 @@ def test_auto_picks_chordal_for_loops_and_odometry_for_trees():
     assert posegraph.optimize(tree).summary.initialization == "odometry"
 
 
-def _gnss_track(group, heading: float, seed: int) -> tuple[PoseGraph, object]:
-    """200 poses driving a gentle S-curve that starts at UTM-like coordinates facing
-    ``heading``, with odometry and a position-only prior (σ = 1 m, no rotation information)
-    every 20 poses: GNSS fused with odometry, a tree with no loop closure."""
-    rng = np.random.default_rng(seed)
-    d = group.point_dim
-    start = np.eye(d + 1)
-    start[:2, :2] = [[np.cos(heading), -np.sin(heading)], [np.sin(heading), np.cos(heading)]]
-    start[:d, d] = [500000.0, 4000000.0, 100.0][:d]
-    steps = np.zeros((199, group.dof))
-    steps[:, 0] = 1.0  # forward, turning by a yaw (θ of SE2, φ_z of SE3) that swings
-    steps[:, 2 if group is SE2 else 5] = 0.02 * np.sin(np.arange(1, 200) / 10)
-    truth = [group.from_matrix(start)]
-    for step in group.exp(steps):
-        truth.append(truth[-1] @ step)
-    truth = group.concatenate([t.broadcast_to((1,)) for t in truth])
-    graph = PoseGraph(group)
-    graph.add_nodes(np.arange(200))
-    odometry = truth[:-1].between(truth[1:]).retract(rng.normal(scale=0.01, size=(199, group.dof)))
-    graph.add_edges(np.arange(199), np.arange(1, 200), odometry, np.eye(group.dof) * 100.0)
-    gnss = np.arange(0, 200, 20)
-    fixes = np.tile(np.eye(d + 1), (gnss.size, 1, 1))
-    fixes[:, :d, d] = truth.translation[gnss] + rng.normal(scale=1.0, size=(gnss.size, d))
-    information = np.zeros((group.dof, group.dof))
-    information[:d, :d] = np.eye(d)
-    graph.add_priors(gnss, fixes, information)
-    return graph, truth
-
-
 @pytest.mark.parametrize("heading", [0.5, 1.5, 3.0])
 @pytest.mark.parametrize("group", [SE2, SE3], ids=lambda g: g.__name__)
 def test_a_gnss_track_far_from_the_origin_reaches_its_optimum(group, heading):
@@ -126,7 +97,7 @@ def test_a_gnss_track_far_from_the_origin_reaches_its_optimum(group, heading):
     fix facing its identity rotation), and Levenberg-Marquardt ended at errors up to 7e13 after
     100 iterations. Moved onto the fixes, every initialiser and the robust mode reach the optimum
     found from the true poses."""
-    graph, truth = _gnss_track(group, heading, seed=66)
+    graph, truth = gnss_track(group, heading, seed=66)
     from_truth = graph.copy()
     from_truth.set_values(truth)
     best = posegraph.optimize(from_truth, init="file").summary.final_error

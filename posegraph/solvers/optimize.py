@@ -277,7 +277,9 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
                 termination = "damping exceeded its limit (no step lowers the error)"
                 break
             continue
-        if decrease <= options.relative_decrease * previous_error:
+        if decrease <= options.relative_decrease * previous_error and (
+            not lm or predicted <= options.relative_decrease * previous_error
+        ):
             termination, converged = "relative error decrease below tolerance", True
             break
         if step_norm < options.step_tolerance * (size + options.step_tolerance):

@@ -15,7 +15,8 @@ class SolverOptions:
         max_iterations: most iterations, accepted or rejected.
         time_limit: seconds of wall-clock time after which the run stops (None: no limit).
         relative_decrease: stop when an accepted step lowers the error by less than this
-            fraction of it.
+            fraction of it, and (Levenberg-Marquardt) its quadratic model predicted no more;
+            also when the model predicts less for the next (near) Gauss-Newton step.
         gradient_tolerance: stop when the largest gradient entry, max|Jᵀ Ω r|, falls below this.
         step_tolerance: stop when |δ| < step_tolerance · (|x| + step_tolerance), with |x| the norm
             of the stacked node tangents (Log of each value) at the start.
