@@ -71,7 +71,7 @@ def resimulate(graph: PoseGraph, truth: LieGroup, seed: int) -> PoseGraph:
     simulated = graph.copy()
     simulated.edges = dataclasses.replace(edges, measurements=measurements)
     simulated.set_values(truth)
-    simulated.optimized = False
+    simulated.solution = None
     return simulated
 
 

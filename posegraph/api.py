@@ -26,8 +26,14 @@ GNC_NAMES = ("gnc", "tls")
 """Names of graduated non-convexity with the truncated-least-squares kernel in a robust spec."""
 LOCAL_RELATIVE_DECREASE = 1e-4
 """Tolerance of the warm start's refinement of new nodes (the full solve follows)."""
+LOCAL_MAX_ITERATIONS = 10
+"""Most iterations of that refinement: a start, which the full solve finishes."""
 GNC_QUANTILE = 0.999
 """Default TLS threshold: an inlier's s = rᵀΩr exceeds √χ²_dof(0.999) once in a thousand."""
+WARM_START_QUANTILE = 0.999
+"""A warm start restarts from chordal when its new measurements' Σ rᵀΩr exceeds χ²_m(0.999)."""
+RESTART = "chordal (restart: the new measurements disagree with the previous solution)"
+"""The initialisation of a warm start that failed ``_agree_with_solution``."""
 KERNEL_QUANTILE = 0.95
 """Default width of the IRLS kernels (Huber, Cauchy, …): √χ²_dof(0.95), Huber's usual choice."""
 
@@ -98,16 +104,16 @@ def optimize(
     )
     reused = []
     if init == "auto" and graph.optimized:
-        init = "warm start"
-        reused.append(f"previous solution ({int(graph.initialized.sum())} nodes)")
-        if not graph.initialized.all():
-            _initialize_new_nodes(graph, options)
-    elif init == "auto":
-        init = "odometry" if robust else choose(graph)
-    if init not in ("file", "warm start"):
-        graph.set_values(initialize(graph, init))
-    else:
+        solved = int(graph.initialized.sum())
+        init = _warm_start(graph, options, least_squares=robust is None)
+        if init == "warm start":
+            reused.append(f"previous solution ({solved} nodes)")
+    elif init == "file":
         graph.require_values("add them with values or use init='auto'")
+    else:
+        if init == "auto":
+            init = "odometry" if robust else choose(graph)
+        graph.set_values(initialize(graph, init))
     init_time = time.perf_counter() - start
 
     rejected = np.zeros(0, dtype=np.int64)
@@ -133,8 +139,41 @@ def optimize(
     result.summary.input_error = input_error
     result.summary.total_time = time.perf_counter() - start
     graph.set_values(result.values)
-    graph.optimized = True
+    graph.solution = (graph.edges, graph.priors)
     return result
+
+
+def _warm_start(graph: PoseGraph, options: SolverOptions, least_squares: bool) -> str:
+    """Start from the previous solution, composing and refining the nodes added since
+    (``_initialize_new_nodes``); returns the initialisation's name.
+
+    A local start can sit in the wrong basin once new loop closures pull the map far (a noisy
+    graph). In least squares, when the new measurements fail ``_agree_with_solution`` on a
+    graph with loops, the values restart from chordal relaxation, as a new graph's would.
+    """
+    if not graph.initialized.all():
+        _initialize_new_nodes(graph, options)
+    if least_squares and choose(graph) == "chordal" and not _agree_with_solution(graph):
+        graph.set_values(initialize(graph, "chordal"))
+        return RESTART
+    return "warm start"
+
+
+def _agree_with_solution(graph: PoseGraph) -> bool:
+    """Whether the measurements added since the last solution are consistent with it, by a χ²
+    innovation test: their Σ rᵀΩr at the warm start is below χ²_m(``WARM_START_QUANTILE``),
+    m = their count × dof (the solved nodes keep their values, so the cost of the others is
+    unchanged). Only appended measurements are tested: if some were removed or changed since,
+    this holds, as the solution still suits the measurements that remain."""
+    edges, priors = graph.solution
+    if not (graph.edges.starts_with(edges) and graph.priors.starts_with(priors)):
+        return True
+    new_edges = graph.edges.subset(slice(len(edges), None))
+    new_priors = graph.priors.subset(slice(len(priors), None))
+    dof = graph.group.dof * (len(new_edges) + len(new_priors))
+    if dof == 0:
+        return True
+    return chi2(graph.values, new_edges, new_priors) <= default_width(dof, WARM_START_QUANTILE) ** 2
 
 
 def _initialize_new_nodes(graph: PoseGraph, options: SolverOptions) -> None:
@@ -152,7 +191,10 @@ def _initialize_new_nodes(graph: PoseGraph, options: SolverOptions) -> None:
     local.set_values(align_to_priors(local, spanning_tree_values(local, known=solved)))
     # The local problem is small: SuperLU's start-up is cheaper than CHOLMOD's.
     local_options = dataclasses.replace(
-        options, relative_decrease=LOCAL_RELATIVE_DECREASE, linear_solver="scipy"
+        options,
+        relative_decrease=LOCAL_RELATIVE_DECREASE,
+        max_iterations=min(options.max_iterations, LOCAL_MAX_ITERATIONS),
+        linear_solver="scipy",
     )
     refined = solve(local, local_options)
     graph.set_values(graph.values.set_at(np.flatnonzero(new), refined.values[~solved]))

@@ -129,8 +129,9 @@ class PoseGraph:
         self.fixed = np.zeros(0, dtype=bool)
         self.initialized = np.zeros(0, dtype=bool)
         """Which nodes have values (nodes added without one get them when optimised)."""
-        self.optimized = False
-        """Whether ``posegraph.optimize`` left its solution in ``values`` (warm starts)."""
+        self.solution: tuple[EdgeSet, EdgeSet] | None = None
+        """The between edges and priors whose optimum ``posegraph.optimize`` left in ``values``
+        (None if it did not): a warm start tests the measurements added since against it."""
         self.last_result = None
         """The last ``posegraph.optimize`` result and the structure it was solved for: warm
         starts reuse its normal equations and linearisation."""
@@ -148,6 +149,11 @@ class PoseGraph:
         return {**self.__dict__, "last_result": None}
 
     # ------------------------------------------------------------------------ queries
+    @property
+    def optimized(self) -> bool:
+        """Whether ``values`` holds a solution of ``posegraph.optimize`` (it warm-starts)."""
+        return self.solution is not None
+
     @property
     def num_nodes(self) -> int:
         return int(self.node_ids.shape[0])
@@ -425,7 +431,7 @@ class PoseGraph:
         other.priors = self.priors
         other.fixed = self.fixed.copy()
         other.initialized = self.initialized.copy()
-        other.optimized = self.optimized
+        other.solution = self.solution
         other.equivalences = self.equivalences.copy()
         other._index_of = dict(self._index_of)
         other.structure_version = self.structure_version

@@ -7,9 +7,10 @@ import pickle
 
 import numpy as np
 import pytest
-from posegraph_datasets.generators import manhattan_world
+from posegraph_datasets.generators import manhattan_world, sphere
 
 import posegraph
+from posegraph.api import RESTART
 from posegraph.benchmarks.incremental import stream
 from posegraph.factors import between_squares, linearize_between, linearize_priors
 from posegraph.graph import PoseGraph
@@ -281,6 +282,35 @@ def test_warm_starts_reuse_the_solution_and_then_the_structure():
     assert np.mean([s.num_iterations for s in summaries[1:]]) < np.mean(
         [summaries[0].num_iterations, 4]
     )
+
+
+def test_a_warm_start_restarts_when_new_loops_disagree_with_the_solution():
+    """With rotations this noisy (σ = 0.4 rad per edge), the optimum of the first rings can sit
+    in another basin than the optimum once later rings close their loops: solving on from it
+    stalled at 419.6, where the graph's optimum is 322.4. The new loops then fail the χ² test
+    against the previous solution, and the values restart from chordal relaxation."""
+    full, truth = sphere(rings=8, poses_per_ring=16, rotation_sigma=0.4, translation_sigma=0.4)
+    summaries = [posegraph.optimize(graph).summary for graph in stream(full, 16)]
+    assert RESTART in [s.initialization for s in summaries[1:]]
+    assert "warm start" in [s.initialization for s in summaries[1:]]
+    from_truth = full.copy()
+    from_truth.set_values(truth)
+    best = posegraph.optimize(from_truth, init="file").summary.final_error
+    assert summaries[-1].final_error == pytest.approx(best, rel=1e-6)
+
+
+def test_only_new_measurements_that_disagree_restart_a_least_squares_warm_start():
+    graph, _ = manhattan_world(num_poses=120, seed=87)
+    posegraph.optimize(graph)
+    loops = np.flatnonzero(np.abs(graph.edges.j - graph.edges.i) > 1)
+    graph.remove_edges(loops[:3])  # the solution still suits the measurements that remain
+    assert posegraph.optimize(graph).summary.initialization == "warm start"
+    robust = graph.copy()
+    for g in (graph, robust):  # a loop 30 m and 2 rad away from what the map says
+        g.add_edge(0, 60, SE2.from_xytheta([30.0, 0.0, 2.0]), np.eye(3) * 100)
+    assert posegraph.optimize(graph).summary.initialization == RESTART
+    # A robust solve keeps its warm start: chordal relaxation would spread an outlier's pull.
+    assert posegraph.optimize(robust, robust="gnc").summary.initialization == "warm start"
 
 
 def test_an_optimised_graph_and_its_result_pickle_and_warm_start_alike():
