@@ -9,7 +9,7 @@ import numpy as np
 
 from .factors import between_squares, chi2
 from .gnc import gnc_tls
-from .graph import PoseGraph
+from .graph import PoseGraph, Solution
 from .initialization import (
     align_to_priors,
     choose,
@@ -117,6 +117,7 @@ def optimize(
     init_time = time.perf_counter() - start
 
     rejected = np.zeros(0, dtype=np.int64)
+    weights = np.ones(graph.num_edges)
     if robust is None:
         system, previous = _cached_system(graph, options)
         result = solve(graph, options, callback, system=system, previous=previous)
@@ -126,11 +127,13 @@ def optimize(
         if name in GNC_NAMES:
             outcome = gnc_tls(graph, mask, width, options)
             result, rejected = outcome.result, outcome.rejected
+            weights[rejected] = 0.0
         else:
             weighting = Robustifier(RobustKernel(name, width), mask)
             result = solve(graph, options, callback, weighting=weighting)
             s = between_squares(result.values, graph.edges)
             rejected = np.flatnonzero(mask & (s > width**2))
+            _, weights = weighting.cost_and_weights(s)
         result.summary.robust = f"{name}:{width:.6g}"
         result.summary.rejected_edges = rejected.tolist()
     result.summary.initialization = init
@@ -139,7 +142,7 @@ def optimize(
     result.summary.input_error = input_error
     result.summary.total_time = time.perf_counter() - start
     graph.set_values(result.values)
-    graph.solution = (graph.edges, graph.priors)
+    graph.solution = Solution(graph.edges, graph.priors, weights)
     return result
 
 
@@ -165,7 +168,7 @@ def _agree_with_solution(graph: PoseGraph) -> bool:
     m = their count × dof (the solved nodes keep their values, so the cost of the others is
     unchanged). Only appended measurements are tested: if some were removed or changed since,
     this holds, as the solution still suits the measurements that remain."""
-    edges, priors = graph.solution
+    edges, priors = graph.solution.edges, graph.solution.priors
     if not (graph.edges.starts_with(edges) and graph.priors.starts_with(priors)):
         return True
     new_edges = graph.edges.subset(slice(len(edges), None))

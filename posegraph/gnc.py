@@ -90,10 +90,7 @@ def _stages(graph, mask, width_sq, options, start: Result, restart: bool):
         rounds += 1
         weights[mask] = tls_gnc_weights(s[mask], width_sq, mu)
         now_active = weights > 0
-        work = graph.with_edges(now_active)
-        work.edges = dataclasses.replace(
-            work.edges, information=work.edges.information * weights[now_active, None, None]
-        )
+        work = graph.weighted(weights)
         if active is None or not np.array_equal(now_active, active):
             active = now_active
             system = NormalEquations(work, work.gauge_nodes(), options.linear_solver)

@@ -110,6 +110,26 @@ class EdgeSet:
         return EdgeSet(self.i[keep], self.j[keep], self.measurements[keep], self.information[keep])
 
 
+@dataclasses.dataclass(frozen=True, eq=False)
+class Solution:
+    """What ``posegraph.optimize`` left in a graph's values: the optimum over these between
+    edges and priors, with each edge's weight there (1 in least squares; a robust kernel's
+    IRLS weight ρ′(s), 0 for an edge that graduated non-convexity rejected)."""
+
+    edges: EdgeSet
+    priors: EdgeSet
+    weights: np.ndarray
+
+    def edge_weights(self, edges: EdgeSet) -> np.ndarray:
+        """The weights of ``edges``: the solution's for the edges it was found over, if they
+        still come first and unchanged, and 1 for edges added since (1 for all if some were
+        removed or changed)."""
+        weights = np.ones(len(edges))
+        if edges.starts_with(self.edges):
+            weights[: len(self.edges)] = self.weights
+        return weights
+
+
 class PoseGraph:
     """A pose graph over one group (SE2, SE3 or Sim3)."""
 
@@ -129,9 +149,9 @@ class PoseGraph:
         self.fixed = np.zeros(0, dtype=bool)
         self.initialized = np.zeros(0, dtype=bool)
         """Which nodes have values (nodes added without one get them when optimised)."""
-        self.solution: tuple[EdgeSet, EdgeSet] | None = None
-        """The between edges and priors whose optimum ``posegraph.optimize`` left in ``values``
-        (None if it did not): a warm start tests the measurements added since against it."""
+        self.solution: Solution | None = None
+        """What ``posegraph.optimize`` left in ``values`` (None if it did not): a warm start
+        tests the measurements added since against it, and covariances take its edge weights."""
         self.last_result = None
         """The last ``posegraph.optimize`` result and the structure it was solved for: warm
         starts reuse its normal equations and linearisation."""
@@ -353,6 +373,16 @@ class PoseGraph:
         other = self.copy()
         other.edges = self.edges.subset(keep)
         other.structure_version += 1
+        return other
+
+    def weighted(self, weights: np.ndarray) -> PoseGraph:
+        """A copy with each between edge's information times its weight; edges of weight 0
+        are left out (they would join components without information)."""
+        kept = weights > 0
+        other = self.with_edges(kept)
+        other.edges = dataclasses.replace(
+            other.edges, information=other.edges.information * weights[kept, None, None]
+        )
         return other
 
     def subgraph(self, nodes: np.ndarray, edges: np.ndarray | None = None) -> PoseGraph:

@@ -46,6 +46,11 @@ def marginals(
     """Covariances of ``nodes`` (ids) at ``values`` (default: the graph's current values, which
     ``posegraph.optimize`` leaves at the optimum).
 
+    After a robust solve, each between edge's information counts with its weight in that
+    solution (``PoseGraph.solution``: IRLS weights ρ′(s), as gtsam's robust noise models
+    weigh it; edges rejected as outliers not at all), so a false loop closure cannot shrink
+    the covariances.
+
     Returns (k, d, d) marginal blocks, or with ``joint=True`` the (k·d, k·d) joint covariance of
     the nodes together (for a pair, the 2d × 2d matrix with their cross-covariance).
     """
@@ -55,6 +60,8 @@ def marginals(
     elif values.batch_shape != (graph.num_nodes,):
         raise ValueError(f"values are one per node ({graph.num_nodes}), not {values.batch_shape}")
     index = graph.index(nodes)
+    if graph.solution is not None:
+        graph = graph.weighted(graph.solution.edge_weights(graph.edges))
     system, _ = factorized_information(graph, values, linear_solver, for_covariance=True)
     if joint:
         return joint_covariances(system, [index])[0]

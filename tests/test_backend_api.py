@@ -8,6 +8,7 @@ import pickle
 import numpy as np
 import pytest
 from posegraph_datasets.generators import manhattan_world, sphere
+from posegraph_datasets.outliers import add_false_loops
 
 import posegraph
 from posegraph.api import RESTART
@@ -368,6 +369,29 @@ def test_unchanged_structure_reuses_pattern_and_symbolic_factorization():
     assert not any(r.startswith("sparsity pattern") for r in fourth.summary.reused)
     assert not any(r.startswith("linearization") for r in fourth.summary.reused)
     assert fourth.summary.final_error == pytest.approx(first.summary.final_error, rel=1e-6)
+
+
+def test_marginals_after_gnc_leave_the_rejected_loops_out():
+    """A back end that rejects false loop closures must not have them shrink its covariances:
+    after GNC they are those of the graph without the false loops. Before, every rejected loop
+    counted with its full information."""
+    graph, _ = manhattan_world(num_poses=150, seed=93)
+    corrupted, false = add_false_loops(graph, 0.1, seed=1)
+    result = posegraph.optimize(corrupted, robust="gnc")
+    np.testing.assert_array_equal(result.summary.rejected_edges, np.flatnonzero(false))
+    posegraph.optimize(graph)
+    nodes = graph.node_ids[[40, 90, 149]]
+    np.testing.assert_allclose(
+        posegraph.marginals(corrupted, nodes), posegraph.marginals(graph, nodes), rtol=1e-5
+    )
+    # An edge added since the solution counts in full until the next solve weighs it.
+    corrupted.add_edge(0, 149, graph.values[0].between(graph.values[149]), np.eye(3) * 1e4)
+    graph.add_edge(0, 149, graph.values[0].between(graph.values[149]), np.eye(3) * 1e4)
+    np.testing.assert_allclose(
+        posegraph.marginals(corrupted, nodes, values=graph.values),
+        posegraph.marginals(graph, nodes, values=graph.values),
+        rtol=1e-9,
+    )
 
 
 def test_marginals_are_blocks_of_the_inverse_information():

@@ -109,11 +109,21 @@ def _noise_model(group: type[LieGroup], information: np.ndarray):
     return gtsam.noiseModel.Gaussian.Information(matrix_to_gtsam(group, information))
 
 
-def graph_to_gtsam(graph, values=None, hold_gauge: bool = True):
+def _edge_noise_model(group: type[LieGroup], information: np.ndarray, huber, edge: int):
+    """The Gaussian noise model, made robust by gtsam's Huber kernel where ``huber`` says."""
+    gaussian = _noise_model(group, information)
+    if huber is None or not huber[0][edge]:
+        return gaussian
+    kernel = gtsam.noiseModel.mEstimator.Huber.Create(huber[1])
+    return gtsam.noiseModel.Robust.Create(kernel, gaussian)
+
+
+def graph_to_gtsam(graph, values=None, hold_gauge: bool = True, huber=None):
     """(NonlinearFactorGraph, Values) for a PoseGraph; keys are the node ids.
 
     Held nodes (``graph.gauge_nodes()``) get a prior of σ = ``GAUGE_SIGMA`` at their value,
     which is how gtsam expresses a fixed node; it adds ≈ 0 to the error at that value.
+    ``huber``, (edge mask, width): those between edges get gtsam's Huber kernel of that width.
     """
     group = graph.group
     values = graph.values if values is None else values
@@ -130,7 +140,7 @@ def graph_to_gtsam(graph, values=None, hold_gauge: bool = True):
                 ids[edges.i[e]],
                 ids[edges.j[e]],
                 to_gtsam(edges.measurements[e]),
-                _noise_model(group, edges.information[e]),
+                _edge_noise_model(group, edges.information[e], huber, e),
             )
         )
     prior = _PRIOR_FACTOR[group]
