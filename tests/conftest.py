@@ -83,7 +83,7 @@ def union(first: PoseGraph, second: PoseGraph, id_offset: int) -> PoseGraph:
 POSE_GROUPS = [SE2, SE3, Sim3]
 
 
-def gnss_track(group, heading: float, seed: int) -> tuple[PoseGraph, LieGroup]:
+def gnss_track(group: type[LieGroup], heading: float, seed: int) -> tuple[PoseGraph, LieGroup]:
     """200 poses driving a gentle S-curve that starts at UTM-like coordinates facing
     ``heading``, with odometry and a position-only prior (σ = 1 m, no rotation information)
     every 20 poses: GNSS fused with odometry, a tree with no loop closure."""
