@@ -81,8 +81,9 @@ def optimize(
 
     ``init``: see ``posegraph.initialization.initialize``. "auto" warm-starts a graph that was
     optimised before: its nodes keep their values, and nodes added since without values are
-    composed from them along a spanning tree and refined alone, the solved nodes held. On a
-    fresh graph it picks chordal relaxation for graphs with loops, or odometry when ``robust``
+    composed from them along a spanning tree and refined alone, the solved nodes held; in least
+    squares it restarts from chordal relaxation instead (``RESTART``) when the measurements
+    added since disagree with the previous solution (``_warm_start``). On a fresh graph it picks chordal relaxation for graphs with loops, or odometry when ``robust``
     is set (the odometry chain is trusted). While the structure is unchanged, the sparsity
     pattern and symbolic factorisation of the last call are reused; ``summary.reused`` says
     what was.

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 from posegraph_datasets.paths import gtsam_data_dir
 
-from ..api import optimize
+from ..api import RESTART, optimize
 from ..graph import PoseGraph
 from ..io import read_graph
 
@@ -66,7 +66,7 @@ def run(path: Path, step: int) -> str:
     difference = (last_warm.final_error - last_scratch.final_error) / last_scratch.final_error
     iterations = np.mean([w.num_iterations for _, w, _ in rows])
     scratch_iterations = np.mean([s.num_iterations for _, _, s in rows])
-    restarts = sum(w.initialization.startswith("chordal") for _, w, _ in rows[1:])
+    restarts = sum(w.initialization == RESTART for _, w, _ in rows[1:])
     return "\n".join(
         [
             f"{path.name}: {full.num_nodes} poses streamed in steps of {step} ({len(rows)} optimisations)",
