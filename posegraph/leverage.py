@@ -102,10 +102,13 @@ def _whitened(
 
 
 def _factorize(
-    graph: PoseGraph, values: LieGroup, linear_solver: str, for_covariance: bool = False
+    graph: PoseGraph,
+    values: LieGroup,
+    linear_solver: str,
+    covariance_of: list[np.ndarray] | None = None,
 ) -> _Factored:
     system, between = factorized_information(
-        graph, values, linear_solver, for_covariance, regularize=True
+        graph, values, linear_solver, covariance_of, regularize=True
     )
     prior_rows = (
         information_root(graph.priors.information) @ linearize_priors(values, graph.priors).jac_j
@@ -198,10 +201,10 @@ def deleted_residuals(
     indexed by ``edges``, or estimated for all from ``probes`` Rademacher probes."""
     if edges is None:
         return Leverage(graph, values, probes, seed, linear_solver).deleted_residuals()
-    factored = _factorize(graph, values, linear_solver, for_covariance=True)
     edges = np.asarray(edges, dtype=np.int64)
     d = graph.group.dof
     ends = list(np.stack([graph.edges.i[edges], graph.edges.j[edges]], axis=1))
+    factored = _factorize(graph, values, linear_solver, covariance_of=ends)
     covariances = np.array(joint_covariances(factored.system, ends)).reshape(-1, 2 * d, 2 * d)
     rows = np.concatenate([factored.rows_i[edges], factored.rows_j[edges]], axis=2)
     hat = rows @ covariances @ np.swapaxes(rows, 1, 2)  # Aₑ H⁻¹ Aₑᵀ

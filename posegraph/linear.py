@@ -34,6 +34,10 @@ class BlockPattern:
     pattern built for the same edges and priors before more nodes, edges and priors were
     appended. If its nodes kept their blocks, it is grown instead of rebuilt (``self.grown``):
     only the appended edges' blocks are located and merged into its sorted block list.
+
+    ``covariance_of``: groups of nodes whose joint covariance will be read. The factorisation
+    is prepared for ``covariance_blocks``, and the blocks between the nodes of each group join
+    the pattern (as zeros where no edge fills them), which puts them in the factor's pattern.
     """
 
     def __init__(
@@ -44,7 +48,7 @@ class BlockPattern:
         prior_i: np.ndarray,
         d: int,
         backend: str = "auto",
-        for_covariance: bool = False,
+        covariance_of: list[np.ndarray] | None = None,
         previous: BlockPattern | None = None,
     ) -> None:
         self.d = d
@@ -52,13 +56,18 @@ class BlockPattern:
         self.num_blocks = int(block_of.max(initial=-1)) + 1
         self.size = self.num_blocks * d
         a, b, p = block_of[edge_i], block_of[edge_j], block_of[prior_i]
+        coupled = block_of[_pairs_within(covariance_of or [])]
         # Every edge contributes blocks (a, a), (b, b), (a, b), (b, a); every prior (p, p).
-        self.grown = previous is not None and previous._grows_into(block_of, a, b, p, d)
+        self.grown = (
+            previous is not None
+            and coupled.size == 0
+            and previous._grows_into(block_of, a, b, p, d)
+        )
         self._ends = (a, b, p)
         if self.grown:
             block_keys, edge_blocks, prior_blocks = self._grow(previous, a, b, p)
         else:
-            block_keys, edge_blocks, prior_blocks = self._locate(a, b, p)
+            block_keys, edge_blocks, prior_blocks = self._locate(a, b, p, coupled)
         self._block_keys, self._edge_blocks = block_keys, edge_blocks
         self._prior_blocks = prior_blocks
         block_positions = self._layout(block_keys)
@@ -83,7 +92,7 @@ class BlockPattern:
             self.indptr,
             self.size,
             backend,
-            for_covariance,
+            covariance_of is not None,
             previous.cholesky if self.grown else None,
         )
 
@@ -95,14 +104,16 @@ class BlockPattern:
         """(4, m) keys of the blocks (a, a), (b, b), (a, b), (b, a) of edges a → b."""
         return np.stack([self._keys(a, a), self._keys(b, b), self._keys(a, b), self._keys(b, a)])
 
-    def _locate(self, a, b, p):
-        """Sorted distinct block keys (every diagonal block, every edge and prior block) and the
-        index among them of each edge block (4, m) and prior block (−1 where held)."""
+    def _locate(self, a, b, p, coupled: np.ndarray | None = None):
+        """Sorted distinct block keys (every diagonal block, every edge and prior block, and
+        both blocks of each ``coupled`` pair (2, k)) and the index among them of each edge block
+        (4, m) and prior block (−1 where held)."""
         edge_keys, prior_keys = self._edge_keys(a, b), self._keys(p, p)
         diagonal = np.arange(self.num_blocks)
-        block_keys = np.unique(
-            np.concatenate([self._keys(diagonal, diagonal), edge_keys[2:].ravel(), prior_keys])
-        )
+        keys = [self._keys(diagonal, diagonal), edge_keys[2:].ravel(), prior_keys]
+        if coupled is not None:
+            keys.append(self._edge_keys(*coupled)[2:].ravel())
+        block_keys = np.unique(np.concatenate(keys))
         block_keys = block_keys[block_keys >= 0]
 
         def index(keys: np.ndarray) -> np.ndarray:
@@ -240,6 +251,12 @@ class BlockPattern:
         return scipy.sparse.csc_matrix((data, self.indices, self.indptr), (self.size, self.size))
 
 
+def _pairs_within(groups: list[np.ndarray]) -> np.ndarray:
+    """(2, k) node indices: every pair of distinct members of each group."""
+    pairs = [group[np.stack(np.triu_indices(group.size, 1))] for group in groups]
+    return np.concatenate([np.zeros((2, 0), dtype=np.int64), *pairs], axis=1)
+
+
 def free_block_index(num_nodes: int, held: np.ndarray) -> np.ndarray:
     """Block index of every node: consecutive over free nodes, −1 for held ones."""
     block_of = np.full(num_nodes, -1, dtype=np.int64)
@@ -257,10 +274,11 @@ class NormalEquations(BlockPattern):
         graph: PoseGraph,
         held: np.ndarray,
         backend: str = "auto",
-        for_covariance: bool = False,
+        covariance_of: list[np.ndarray] | None = None,
         previous: NormalEquations | None = None,
     ) -> None:
-        """``previous``: see ``BlockPattern``; the system of this graph before it grew."""
+        """``covariance_of`` (groups of node indices) and ``previous`` (the system of this
+        graph before it grew): see ``BlockPattern``."""
         self.dof = graph.group.dof
         block_of = free_block_index(graph.num_nodes, held)
         super().__init__(
@@ -270,7 +288,7 @@ class NormalEquations(BlockPattern):
             graph.priors.i,
             self.dof,
             backend,
-            for_covariance,
+            covariance_of,
             previous,
         )
 
@@ -304,13 +322,13 @@ def factorized_information(
     graph: PoseGraph,
     values: LieGroup,
     linear_solver: str = "auto",
-    for_covariance: bool = False,
+    covariance_of: list[np.ndarray] | None = None,
     regularize: bool = False,
 ) -> tuple[NormalEquations, Linearization]:
     """The information matrix H = Σ Jᵀ Ω J of ``graph`` at ``values`` (priors included, gauge
     nodes held), assembled and factorised (with ``regularize``, by ``factorize_regularized``),
-    with the between edges' linearisation."""
-    system = NormalEquations(graph, graph.gauge_nodes(), linear_solver, for_covariance)
+    with the between edges' linearisation; ``covariance_of``: see ``BlockPattern``."""
+    system = NormalEquations(graph, graph.gauge_nodes(), linear_solver, covariance_of)
     between = linearize_between(values, graph.edges)
     priors = linearize_priors(values, graph.priors)
     data, _ = system.assemble(between, graph.edges.information, priors, graph.priors.information)

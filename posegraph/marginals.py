@@ -3,8 +3,11 @@
 At the estimate X̂, the Gaussian approximation of the posterior has information H = Σ Jᵀ Ω J over
 the free nodes' tangents, with right perturbation X = X̂ · Exp(δ) (CONVENTIONS.md). The
 covariance blocks of chosen nodes are blocks of H⁻¹, obtained from one sparse Cholesky
-factorisation and one solve with the columns of those nodes as right-hand sides (never a dense
-inverse). Held nodes (the gauge) have zero covariance: everything is relative to them, as in
+factorisation (never a dense inverse): by solves with the nodes' unit columns, or with CHOLMOD
+for more than a few nodes (``sparse_cholesky.SOLVED_COLUMNS``), by selected inversion of the
+factor on the paths from those nodes to the root of its elimination tree. A joint covariance
+puts the blocks between its nodes into H's pattern (as zeros), so that they lie in the
+factor's. Held nodes (the gauge) have zero covariance: everything is relative to them, as in
 gtsam with a tight prior on the gauge node.
 """
 
@@ -19,7 +22,8 @@ from .linear import NormalEquations, factorized_information
 
 def joint_covariances(system: NormalEquations, groups: list[np.ndarray]) -> list[np.ndarray]:
     """The joint covariance, (k·d, k·d), of each group of k node indices, from ``system``
-    factorised for covariance; rows and columns of held nodes are zero."""
+    factorised for the covariance of these groups (``covariance_of``); rows and columns of
+    held nodes are zero."""
     d = system.dof
     slots, columns = [], []
     for group in groups:
@@ -62,8 +66,9 @@ def marginals(
     index = graph.index(nodes)
     if graph.solution is not None:
         graph = graph.weighted(graph.solution.edge_weights(graph.edges))
-    system, _ = factorized_information(graph, values, linear_solver, for_covariance=True)
+    groups = [index] if joint else list(index[:, None])
+    system, _ = factorized_information(graph, values, linear_solver, covariance_of=groups)
     if joint:
-        return joint_covariances(system, [index])[0]
+        return joint_covariances(system, groups)[0]
     d = graph.group.dof
-    return np.array(joint_covariances(system, list(index[:, None]))).reshape(-1, d, d)
+    return np.array(joint_covariances(system, groups)).reshape(-1, d, d)

@@ -11,12 +11,14 @@ from posegraph_datasets.generators import manhattan_world, sphere
 from posegraph_datasets.outliers import add_false_loops
 
 import posegraph
+from posegraph import sparse_cholesky
 from posegraph.api import RESTART
 from posegraph.benchmarks.incremental import stream
 from posegraph.factors import between_squares, linearize_between, linearize_priors
 from posegraph.graph import PoseGraph
 from posegraph.lie import SE2, SE3, Sim3
 from posegraph.linear import NormalEquations
+from posegraph.sparse_cholesky import SOLVED_COLUMNS
 
 from .conftest import random_graph
 
@@ -394,8 +396,11 @@ def test_marginals_after_gnc_leave_the_rejected_loops_out():
     )
 
 
-def test_marginals_are_blocks_of_the_inverse_information():
-    """Against a dense inverse of H on a small graph (the library never forms one)."""
+@pytest.mark.parametrize("solved_columns", [SOLVED_COLUMNS, 0])
+def test_marginals_are_blocks_of_the_inverse_information(monkeypatch, solved_columns):
+    """Against a dense inverse of H on a small graph (the library never forms one), by solves
+    and by selected inversion."""
+    monkeypatch.setattr(sparse_cholesky, "SOLVED_COLUMNS", solved_columns)
     graph = random_graph(SE3, 12, 8, seed=85, noise=0.05, priors=0)
     posegraph.optimize(graph)
     held = graph.gauge_nodes()

@@ -15,21 +15,24 @@ bridge = pytest.importorskip("posegraph.validation.gtsam_bridge")
 
 
 @pytest.mark.parametrize("name", ["sphere2500.g2o", "intel.g2o"])
-def test_marginals_equal_gtsam(shared_dataset, name):
-    """10 random nodes, 1e-6 relative; gtsam holds the gauge node with a σ = 1e-6 prior."""
+@pytest.mark.parametrize("count", [10, 40])
+def test_marginals_equal_gtsam(shared_dataset, name, count):
+    """Random nodes, 1e-6 relative; gtsam holds the gauge node with a σ = 1e-6 prior. With 10
+    nodes, posegraph solves with their unit columns; with 40 (and the joint covariance of 20),
+    more columns than ``SOLVED_COLUMNS``, it inverts the factor selectively."""
     graph = posegraph.read_graph(str(shared_dataset(name))).graph
     posegraph.optimize(graph)
-    nodes = np.random.default_rng(90).choice(graph.node_ids[1:], 10, replace=False)
+    nodes = np.random.default_rng(90).choice(graph.node_ids[1:], count, replace=False)
     ours = posegraph.marginals(graph, nodes)
     factors, values = bridge.graph_to_gtsam(graph)
     theirs = gtsam.Marginals(factors, values)
     for k, node in enumerate(nodes.tolist()):
         expected = bridge.matrix_from_gtsam(graph.group, theirs.marginalCovariance(node))
         np.testing.assert_allclose(ours[k], expected, rtol=1e-6, atol=1e-6 * np.abs(expected).max())
-    pair = nodes[:2].tolist()
-    joint = posegraph.marginals(graph, pair, joint=True)
-    permutation = np.kron(np.eye(2), bridge.tangent_permutation(graph.group))
-    expected = permutation.T @ theirs.jointMarginalCovariance(pair).fullMatrix() @ permutation
+    together = nodes[: count // 2 if count > 10 else 2].tolist()
+    joint = posegraph.marginals(graph, together, joint=True)
+    permutation = np.kron(np.eye(len(together)), bridge.tangent_permutation(graph.group))
+    expected = permutation.T @ theirs.jointMarginalCovariance(together).fullMatrix() @ permutation
     np.testing.assert_allclose(joint, expected, rtol=1e-6, atol=1e-6 * np.abs(expected).max())
 
 
