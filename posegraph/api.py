@@ -9,7 +9,7 @@ import numpy as np
 
 from .factors import between_squares, chi2
 from .gnc import gnc_tls
-from .graph import PoseGraph, Solution
+from .graph import PoseGraph, Solution, measured_dof
 from .initialization import (
     align_to_priors,
     choose,
@@ -166,15 +166,15 @@ def _warm_start(graph: PoseGraph, options: SolverOptions, least_squares: bool) -
 def _agree_with_solution(graph: PoseGraph) -> bool:
     """Whether the measurements added since the last solution are consistent with it, by a χ²
     innovation test: their Σ rᵀΩr at the warm start is below χ²_m(``WARM_START_QUANTILE``),
-    m = their count × dof (the solved nodes keep their values, so the cost of the others is
-    unchanged). Only appended measurements are tested: if some were removed or changed since,
+    m = Σ rank Ω, the directions they measure (the solved nodes keep their values, so the cost
+    of the others is unchanged). Only appended measurements are tested: if some were removed or changed since,
     this holds, as the solution still suits the measurements that remain."""
     edges, priors = graph.solution.edges, graph.solution.priors
     if not (graph.edges.starts_with(edges) and graph.priors.starts_with(priors)):
         return True
     new_edges = graph.edges.subset(slice(len(edges), None))
     new_priors = graph.priors.subset(slice(len(priors), None))
-    dof = graph.group.dof * (len(new_edges) + len(new_priors))
+    dof = measured_dof(new_edges.information) + measured_dof(new_priors.information)
     if dof == 0:
         return True
     return chi2(graph.values, new_edges, new_priors) <= default_width(dof, WARM_START_QUANTILE) ** 2

@@ -68,6 +68,16 @@ def information_problems(information: np.ndarray) -> tuple[np.ndarray, Callable[
     return bad, why
 
 
+def measured_dof(information: np.ndarray) -> int:
+    """Σ rank Ωₖ over (n, d, d) information matrices: the directions they weigh (2 for an SE2
+    position-only prior, not 3), counting eigenvalues above the tolerance of
+    ``information_problems``."""
+    if not len(information):
+        return 0
+    eigenvalues = np.linalg.eigvalsh(information)
+    return int(np.count_nonzero(eigenvalues > 1e-9 * eigenvalues[:, -1:]))
+
+
 @dataclasses.dataclass(frozen=True, eq=False)
 class EdgeSet:
     """Stacked edges of one kind. For priors, ``j`` is unused and equals ``i``."""

@@ -316,6 +316,20 @@ def test_only_new_measurements_that_disagree_restart_a_least_squares_warm_start(
     assert posegraph.optimize(robust, robust="gnc").summary.initialization == "warm start"
 
 
+def test_the_restarts_chi2_test_counts_the_directions_a_measurement_weighs():
+    """A prior 15 Mahalanobis units² from the solution is consistent as a full SE2 prior
+    (χ²₃(0.999) = 16.3) but not as a position-only one (χ²₂(0.999) = 13.8): counted as 3
+    degrees of freedom, the position-only prior kept its warm start."""
+    initializations = []
+    for information in (np.eye(3), np.diag([1.0, 1.0, 0.0])):
+        graph, _ = manhattan_world(num_poses=120, seed=87)
+        posegraph.optimize(graph)
+        off = graph.values_of([60]) @ SE2.from_xytheta([np.sqrt(15.0), 0.0, 0.0])
+        graph.add_prior(60, off, information)
+        initializations.append(posegraph.optimize(graph).summary.initialization)
+    assert initializations == ["warm start", RESTART]
+
+
 def test_an_optimised_graph_and_its_result_pickle_and_warm_start_alike():
     """A back end checkpoints its graph, or hands it to another process, after optimising.
     The CHOLMOD handles of the solver cache cannot be pickled, so they are left out: the copy
