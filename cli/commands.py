@@ -8,13 +8,17 @@ import math
 import os
 import sys
 
+import numpy as np
+
 import posegraph
 from posegraph.conversion import convert as convert_graph
 from posegraph.conversion import load_trajectory, output_format
 from posegraph.doctor import diagnose
 from posegraph.evaluation import evaluate
 from posegraph.io import ReadOptions, read_graph
+from posegraph.io.covariances import write_covariances
 from posegraph.solvers import SolverOptions
+from posegraph.sparse_cholesky import NotPositiveDefinite
 
 from .errors import EXIT_NOT_CONVERGED, EXIT_OK, UsageError
 from .progress import Progress
@@ -56,16 +60,19 @@ def _refuse_to_overwrite(source: str, target: str | None, allowed: bool) -> None
         )
 
 
-def _check_output(path: str | None, to: str | None = None, figure: bool = False) -> None:
+def _check_output(
+    path: str | None, to: str | None = None, figure: bool = False, text: bool = False
+) -> None:
     """Fail before any work if ``path`` cannot be written: a format not known by its suffix
-    (or ``to``), or a folder that does not exist."""
+    (or ``to``; a ``figure``'s by matplotlib; ``text`` has one format), or a folder that does
+    not exist."""
     if path is None:
         return
     if figure:
         from posegraph.plotting import check_figure_path
 
         check_figure_path(path)
-    else:
+    elif not text:
         output_format(path, to)
     folder = os.path.dirname(path) or "."
     if not os.path.isdir(folder):
@@ -76,8 +83,10 @@ def _check_output(path: str | None, to: str | None = None, figure: bool = False)
 
 def optimize(args: argparse.Namespace) -> int:
     _refuse_to_overwrite(args.input, args.output, args.overwrite)
+    _refuse_to_overwrite(args.input, args.covariances, args.overwrite)
     _check_output(args.output)
     _check_output(args.plot, figure=True)
+    _check_output(args.covariances, text=True)
     read = read_graph(args.input, _options(args))
     graph = read.graph
     if args.fix:
@@ -109,6 +118,7 @@ def optimize(args: argparse.Namespace) -> int:
             "Nothing written"
         )
     graph.set_values(result.values)
+    covariances = _covariances(args.input, graph) if args.covariances else None
     if args.output:
         convert_graph(
             graph,
@@ -124,18 +134,32 @@ def optimize(args: argparse.Namespace) -> int:
             args.plot,
             title=os.path.basename(args.input),
         )
+    if args.covariances:
+        write_covariances(args.covariances, graph.group.__name__, graph.node_ids, covariances)
     record = {
         "command": "optimize",
         "input": args.input,
         "output": args.output,
         "plot": args.plot,
+        "covariances": args.covariances,
         "group": graph.group.__name__,
         "nodes": graph.num_nodes,
         "edges": graph.num_edges,
         "summary": summary.as_dict(),
     }
-    _emit(args, record, format_summary(args.input, graph, summary, args.output, args.plot))
+    written = {"wrote": args.output, "plotted": args.plot, "covariances": args.covariances}
+    _emit(args, record, format_summary(args.input, graph, summary, written))
     return EXIT_OK if summary.converged else EXIT_NOT_CONVERGED
+
+
+def _covariances(source: str, graph: posegraph.PoseGraph) -> np.ndarray:
+    """Every node's marginal covariance at the graph's values, before anything is written."""
+    try:
+        return posegraph.marginals(graph, graph.node_ids)
+    except NotPositiveDefinite as error:
+        raise UsageError(
+            f"{source}: {error}. Nothing written (without --covariances, the optimised graph is)"
+        ) from None
 
 
 def info(args: argparse.Namespace) -> int:

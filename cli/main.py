@@ -27,7 +27,8 @@ EXAMPLES = {
     "optimize": """examples:
   posegraph optimize datasets/sphere_small.g2o -o optimised.g2o --plot optimised.png
   posegraph optimize city.graph -o city.g2o --init odometry --max-iterations 50 --json
-  posegraph optimize garage.g2o -o out.g2o --fix 0 17 --g2o-rotation-information""",
+  posegraph optimize garage.g2o -o out.g2o --fix 0 17 --g2o-rotation-information
+  posegraph optimize intel.g2o -o out.g2o --robust gnc --covariances covariances.txt""",
     "info": """examples:
   posegraph info datasets/manhattan_small.g2o
   posegraph info broken.g2o --lenient --json""",
@@ -137,13 +138,23 @@ def _parser() -> argparse.ArgumentParser:
         default="loops",
         help="edges the kernel applies to (default: loops, i.e. not between consecutive nodes)",
     )
+    opt.add_argument(
+        "--covariances",
+        metavar="FILE",
+        help="write every pose's marginal covariance at the optimum here (text: id, then the "
+        "upper triangle over the tangent; README)",
+    )
     opt.add_argument("--max-iterations", type=_at_least(0), default=100, help="default: 100")
     opt.add_argument("--time-limit", type=_at_least(0, float), help="seconds")
     opt.add_argument(
         "--fix", type=int, nargs="+", metavar="ID", default=[], help="hold these nodes"
     )
     opt.add_argument("--plot", metavar="FIG.png", help="before/after figure")
-    opt.add_argument("--overwrite", action="store_true", help="allow -o to be the input file")
+    opt.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="allow -o or --covariances to be the input file",
+    )
 
     info = command(
         "info", "inspect a graph: counts, gauge, information checks, problems", [common, reading]

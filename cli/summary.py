@@ -9,8 +9,9 @@ from posegraph.solvers import Summary
 
 
 def format_summary(
-    source: str, graph: PoseGraph, summary: Summary, output: str | None, plot: str | None
+    source: str, graph: PoseGraph, summary: Summary, written: dict[str, str | None]
 ) -> str:
+    """The report of an optimisation; ``written``: the files written, by what they hold."""
     phases = summary.phase_times
     lines = [
         f"{source}: {graph.group.__name__}, {graph.num_nodes} nodes, {graph.num_edges} edges",
@@ -25,10 +26,7 @@ def format_summary(
         lines.append(
             f"  robust          {summary.robust}: {len(summary.rejected_edges)} edge(s) rejected"
         )
-    if output:
-        lines.append(f"  wrote           {output}")
-    if plot:
-        lines.append(f"  plotted         {plot}")
+    lines.extend(f"  {what:<15} {path}" for what, path in written.items() if path)
     return "\n".join(lines)
 
 

@@ -18,6 +18,7 @@ import numpy as np
 from .graph import PoseGraph
 from .lie import LieGroup
 from .linear import NormalEquations, factorized_information
+from .sparse_cholesky import NotPositiveDefinite
 
 
 def joint_covariances(system: NormalEquations, groups: list[np.ndarray]) -> list[np.ndarray]:
@@ -56,7 +57,8 @@ def marginals(
     the covariances.
 
     Returns (k, d, d) marginal blocks, or with ``joint=True`` the (k·d, k·d) joint covariance of
-    the nodes together (for a pair, the 2d × 2d matrix with their cross-covariance).
+    the nodes together (for a pair, the 2d × 2d matrix with their cross-covariance). Raises
+    ``NotPositiveDefinite`` if the information matrix is singular.
     """
     if values is None:
         graph.require_values("optimise the graph first (covariances are taken at its values)")
@@ -67,7 +69,14 @@ def marginals(
     if graph.solution is not None:
         graph = graph.weighted(graph.solution.edge_weights(graph.edges))
     groups = [index] if joint else list(index[:, None])
-    system, _ = factorized_information(graph, values, linear_solver, covariance_of=groups)
+    try:
+        system, _ = factorized_information(graph, values, linear_solver, covariance_of=groups)
+    except NotPositiveDefinite:
+        raise NotPositiveDefinite(
+            "the information matrix is singular: some direction of the free nodes is measured "
+            "by nothing (such as the rotation of a map held only by position priors), so its "
+            "covariance is unbounded"
+        ) from None
     if joint:
         return joint_covariances(system, groups)[0]
     d = graph.group.dof

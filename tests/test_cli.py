@@ -92,6 +92,49 @@ def test_optimize_the_bundled_example(tmp_path):
     assert run("optimize", EXAMPLE, "--quiet").stdout == ""
 
 
+def test_covariances_of_every_pose_equal_gtsams(tmp_path):
+    """``--covariances`` writes each pose's marginal covariance at the optimum, which must equal
+    gtsam.Marginals at the optimised graph's values (1e-6 relative; gtsam holds the gauge node
+    with a σ = 1e-6 prior); the gauge node's is zero."""
+    gtsam = pytest.importorskip("gtsam")
+    from posegraph.validation.gtsam_bridge import graph_to_gtsam, matrix_from_gtsam
+
+    out, written = tmp_path / "out.g2o", tmp_path / "covariances.txt"
+    document = run_json("optimize", EXAMPLE_2D, "-o", out, "--covariances", written)
+    assert document["covariances"] == str(written)
+    header = [line for line in written.read_text().splitlines() if line.startswith("#")]
+    assert "(x, y, theta)" in header[0] and header[1].split()[1:4] == ["id", "x*x", "x*y"]
+    table = np.loadtxt(written)
+    graph = read_graph(str(out)).graph
+    np.testing.assert_array_equal(table[:, 0], graph.node_ids)
+    rows, columns = np.triu_indices(3)
+    covariances = np.zeros((len(table), 3, 3))
+    covariances[:, rows, columns] = covariances[:, columns, rows] = table[:, 1:]
+    assert np.all(covariances[0] == 0)  # the gauge
+    factors, values = graph_to_gtsam(graph)
+    marginals = gtsam.Marginals(factors, values)
+    for node in graph.node_ids[1::37].tolist():
+        expected = matrix_from_gtsam(graph.group, marginals.marginalCovariance(node))
+        np.testing.assert_allclose(
+            covariances[node], expected, rtol=1e-6, atol=1e-6 * np.abs(expected).max()
+        )
+
+
+def test_covariances_that_do_not_exist_are_refused_and_nothing_is_written(tmp_path):
+    """A map held only by a position prior has a rotation that nothing measures."""
+    graph_file, out, written = tmp_path / "free.g2o", tmp_path / "out.g2o", tmp_path / "c.txt"
+    graph_file.write_text(
+        "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\n"
+        "EDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\n"
+        "EDGE_PRIOR_SE2 0 0 0 0 1 0 0 1 0 0\n"
+    )
+    completed = run("optimize", graph_file, "-o", out, "--covariances", written, check_exit=2)
+    assert "information matrix is singular" in completed.stderr
+    assert "Nothing written" in completed.stderr and "Traceback" not in completed.stderr
+    assert not out.exists() and not written.exists()
+    run("optimize", graph_file, "--covariances", graph_file, check_exit=2)  # never the input
+
+
 def test_progress_is_shown_on_a_terminal(tmp_path):
     """Under a pseudo-terminal, optimize prints an iteration table while it runs."""
     main, secondary = pty.openpty()
