@@ -167,8 +167,8 @@ def _agree_with_solution(graph: PoseGraph) -> bool:
     """Whether the measurements added since the last solution are consistent with it, by a χ²
     innovation test: their Σ rᵀΩr at the warm start is below χ²_m(``WARM_START_QUANTILE``),
     m = Σ rank Ω, the directions they measure (the solved nodes keep their values, so the cost
-    of the others is unchanged). Only appended measurements are tested: if some were removed or changed since,
-    this holds, as the solution still suits the measurements that remain."""
+    of the others is unchanged). Only appended measurements are tested: if some were removed
+    or changed since, this holds, as the solution still suits the measurements that remain."""
     edges, priors = graph.solution.edges, graph.solution.priors
     if not (graph.edges.starts_with(edges) and graph.priors.starts_with(priors)):
         return True

@@ -2,7 +2,7 @@
 
 * ``cholmod``: SuiteSparse CHOLMOD through the cvxopt wheel (supernodal, AMD ordering), given
   the lower triangle. The fastest measured here: ≈ 20–40 ms per factorisation of sphere2500's
-  15000 × 15000 Hessian. Covariances by selected inversion of its factor.
+  15000 × 15000 Hessian. Covariances of many columns by selected inversion of its factor.
 * ``scipy``: SuperLU in symmetric mode with a minimum-degree ordering computed once and reused
   (``permc_spec="NATURAL"`` on the pre-permuted matrix). Pure scipy, always available.
 
@@ -15,6 +15,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse
 import scipy.sparse.linalg
+
+from .selected_inversion import SupernodalFactor, inverse_blocks
 
 SOLVED_COLUMNS = 96
 """CHOLMOD's covariance blocks of up to this many columns in all come from solves, beyond from
@@ -142,11 +144,9 @@ class CholmodCholesky:
         """The blocks from the selected inverse of L (``posegraph.selected_inversion``).
         Reading L out (cvxopt's ``getfactor``) leaves CHOLMOD's factor spent: the next
         ``factorize`` analyses the pattern afresh."""
-        from .selected_inversion import SupernodalFactor, inverse_blocks
-
-        place = self._matrix(np.arange(self.size, dtype=float))
-        self._cholmod.solve(self._factor, place, sys=8)  # Pᵀ: where P A Pᵀ puts each column
-        place = np.array(place).ravel().astype(np.int64)
+        columns = self._matrix(np.arange(self.size, dtype=float))
+        self._cholmod.solve(self._factor, columns, sys=8)  # Pᵀ: where P A Pᵀ puts each column
+        place = np.array(columns).ravel().astype(np.int64)
         factor = self._cholmod.getfactor(self._factor)
         self._factor = None
         indptr, indices, data = (np.array(part).ravel() for part in factor.CCS)
