@@ -214,7 +214,7 @@ def _cached_system(graph: PoseGraph, options: SolverOptions):
     the last call's result (its linearisation is reused where it still holds)."""
     if graph.last_result is None:
         return None, None
-    (version, backend), result = graph.last_result
+    (_, backend), result = graph.last_result
     if backend != options.linear_solver:
         return None, None
-    return (result.system if version == graph.structure_version else None), result
+    return graph.current_system(options.linear_solver), result

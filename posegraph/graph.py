@@ -179,6 +179,15 @@ class PoseGraph:
         return {**self.__dict__, "last_result": None}
 
     # ------------------------------------------------------------------------ queries
+    def current_system(self, linear_solver: str):
+        """The normal equations (``NormalEquations``) of the last least-squares
+        ``posegraph.optimize`` with ``linear_solver``, if the graph's structure has not changed
+        since (their pattern and symbolic factorisation still hold); else None."""
+        if self.last_result is None:
+            return None
+        key, result = self.last_result
+        return result.system if key == (self.structure_version, linear_solver) else None
+
     @property
     def optimized(self) -> bool:
         """Whether ``values`` holds a solution of ``posegraph.optimize`` (it warm-starts)."""

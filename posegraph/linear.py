@@ -324,11 +324,14 @@ def factorized_information(
     linear_solver: str = "auto",
     covariance_of: list[np.ndarray] | None = None,
     regularize: bool = False,
+    system: NormalEquations | None = None,
 ) -> tuple[NormalEquations, Linearization]:
     """The information matrix H = Σ Jᵀ Ω J of ``graph`` at ``values`` (priors included, gauge
     nodes held), assembled and factorised (with ``regularize``, by ``factorize_regularized``),
-    with the between edges' linearisation; ``covariance_of``: see ``BlockPattern``."""
-    system = NormalEquations(graph, graph.gauge_nodes(), linear_solver, covariance_of)
+    with the between edges' linearisation; ``covariance_of``: see ``BlockPattern``. ``system``:
+    normal equations built for this graph's structure before, to fill instead of new ones."""
+    if system is None:
+        system = NormalEquations(graph, graph.gauge_nodes(), linear_solver, covariance_of)
     between = linearize_between(values, graph.edges)
     priors = linearize_priors(values, graph.priors)
     data, _ = system.assemble(between, graph.edges.information, priors, graph.priors.information)

@@ -18,7 +18,7 @@ import numpy as np
 from .graph import PoseGraph
 from .lie import LieGroup
 from .linear import NormalEquations, factorized_information
-from .sparse_cholesky import NotPositiveDefinite
+from .sparse_cholesky import NotPositiveDefinite, covariance_by_solves
 
 
 def joint_covariances(system: NormalEquations, groups: list[np.ndarray]) -> list[np.ndarray]:
@@ -56,6 +56,9 @@ def marginals(
     weigh it; edges rejected as outliers not at all), so a false loop closure cannot shrink
     the covariances.
 
+    After a least-squares ``posegraph.optimize``, while the graph's structure is unchanged, the
+    covariances of a few nodes refill its normal equations instead of building new ones.
+
     Returns (k, d, d) marginal blocks, or with ``joint=True`` the (k·d, k·d) joint covariance of
     the nodes together (for a pair, the 2d × 2d matrix with their cross-covariance). Raises
     ``NotPositiveDefinite`` if the information matrix is singular.
@@ -66,11 +69,18 @@ def marginals(
     elif values.batch_shape != (graph.num_nodes,):
         raise ValueError(f"values are one per node ({graph.num_nodes}), not {values.batch_shape}")
     index = graph.index(nodes)
-    if graph.solution is not None:
-        graph = graph.weighted(graph.solution.edge_weights(graph.edges))
+    weights = None if graph.solution is None else graph.solution.edge_weights(graph.edges)
+    if weights is not None and np.any(weights != 1.0):
+        graph = graph.weighted(weights)
     groups = [index] if joint else list(index[:, None])
+    # Solves serve a few nodes with any factor, so the last least-squares solve's normal
+    # equations do (a back end reading its newest pose's covariance after each step).
+    few = covariance_by_solves(index.size * graph.group.dof)
+    reused = graph.current_system(linear_solver) if few else None
     try:
-        system, _ = factorized_information(graph, values, linear_solver, covariance_of=groups)
+        system, _ = factorized_information(
+            graph, values, linear_solver, covariance_of=groups, system=reused
+        )
     except NotPositiveDefinite:
         raise NotPositiveDefinite(
             "the information matrix is singular: some direction of the free nodes is measured "

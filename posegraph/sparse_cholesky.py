@@ -25,6 +25,11 @@ selected inversion. Measured on five benchmark graphs (6 or 3 columns a pose): o
 16 to 64 poses (about 50 to 190 columns)."""
 
 
+def covariance_by_solves(columns: int) -> bool:
+    """Whether covariance blocks of this many columns in all come from solves."""
+    return columns <= SOLVED_COLUMNS
+
+
 class NotPositiveDefinite(ArithmeticError):
     """The matrix could not be factorised (not positive definite, or singular)."""
 
@@ -115,30 +120,37 @@ class CholmodCholesky:
         return np.array(b).reshape(np.shape(rhs))
 
     def covariance_blocks(self, groups: list[np.ndarray]) -> list[np.ndarray]:
-        """Blocks (A⁻¹)[g, g] for groups g of columns, every pair of which lies in A's pattern.
-        With P A Pᵀ = L Lᵀ (supernodal factor), A⁻¹ = Pᵀ (L Lᵀ)⁻¹ P. Up to ``SOLVED_COLUMNS``
-        columns in all, by sparse solves (their cost grows with each column); beyond, by
-        selected inversion of L (whose cost does not)."""
-        if sum(group.size for group in groups) <= SOLVED_COLUMNS:
-            return self._solved_blocks(groups)
-        return self._selected_blocks(groups)
+        """Blocks (A⁻¹)[g, g] for groups g of columns. Up to ``SOLVED_COLUMNS`` columns in all,
+        by sparse solves (their cost grows with each column); beyond, if this factoriser was
+        made ``supernodal`` (P A Pᵀ = L Lᵀ, A⁻¹ = Pᵀ (L Lᵀ)⁻¹ P), by selected inversion of L
+        (whose cost does not), for groups whose every pair lies in A's pattern."""
+        if self._supernodal and not covariance_by_solves(sum(g.size for g in groups)):
+            return self._selected_blocks(groups)
+        return self._solved_blocks(groups)
 
     def _solved_blocks(self, groups: list[np.ndarray]) -> list[np.ndarray]:
-        """Each block as Yᵀ Y with Y = L⁻¹ P E_g: sparse solves with the unit columns."""
+        """Each block as Yᵀ D⁻¹ Y with Y = L⁻¹ P E_g (P A Pᵀ = L D Lᵀ, D = I for a supernodal
+        factor): sparse solves with the unit columns, for a factor of either kind."""
         columns = np.concatenate(groups)
         unit = self._spmatrix(
             1.0, columns.tolist(), list(range(columns.size)), (self.size, columns.size)
         )
         y = self._cholmod.spsolve(self._factor, unit, sys=7)  # P
         y = self._cholmod.spsolve(self._factor, y, sys=4)  # L⁻¹
-        rows, cols = np.array(y.I).ravel(), np.array(y.J).ravel()
-        y = scipy.sparse.csc_matrix((np.array(y.V).ravel(), (rows, cols)), shape=y.size)
+        scaled = self._cholmod.spsolve(self._factor, y, sys=6)  # D⁻¹
+        y, scaled = (self._scipy(m) for m in (y, scaled))
         blocks, start = [], 0
         for group in groups:
-            part = y[:, start : start + group.size]
-            blocks.append((part.T @ part).toarray())
+            part = slice(start, start + group.size)
+            blocks.append((y[:, part].T @ scaled[:, part]).toarray())
             start += group.size
         return blocks
+
+    @staticmethod
+    def _scipy(matrix) -> scipy.sparse.csc_matrix:
+        """A cvxopt sparse matrix as scipy's."""
+        rows, cols = np.array(matrix.I).ravel(), np.array(matrix.J).ravel()
+        return scipy.sparse.csc_matrix((np.array(matrix.V).ravel(), (rows, cols)), matrix.size)
 
     def _selected_blocks(self, groups: list[np.ndarray]) -> list[np.ndarray]:
         """The blocks from the selected inverse of L (``posegraph.selected_inversion``).

@@ -410,6 +410,52 @@ def test_marginals_after_gnc_leave_the_rejected_loops_out():
     )
 
 
+def _count_normal_equations(monkeypatch) -> list:
+    """A list that grows by one whenever ``NormalEquations`` are built."""
+    built, init = [], NormalEquations.__init__
+
+    def counted(self, *args, **kwargs):
+        built.append(1)
+        init(self, *args, **kwargs)
+
+    monkeypatch.setattr(NormalEquations, "__init__", counted)
+    return built
+
+
+def test_the_newest_poses_covariance_fills_the_last_solves_normal_equations(monkeypatch):
+    """A back end reads its newest pose's covariance after each step: the normal equations of
+    the step's solve (pattern and CHOLMOD's analysis) serve it, refilled at the optimum; after
+    a structural change they are built anew. Either way the covariance is that of a graph
+    never optimised here (a copy, which has no cached system)."""
+    graph, _ = manhattan_world(num_poses=120, seed=88)
+    posegraph.optimize(graph)
+    newest = graph.node_ids[-1:]
+    built = _count_normal_equations(monkeypatch)
+    covariance = posegraph.marginals(graph, newest)
+    assert built == []
+    np.testing.assert_allclose(covariance, posegraph.marginals(graph.copy(), newest), rtol=1e-10)
+    graph.add_edge(int(graph.node_ids[0]), int(newest[0]), SE2.identity(), np.eye(3))
+    built.clear()
+    covariance = posegraph.marginals(graph, newest)
+    assert built == [1]
+    np.testing.assert_allclose(covariance, posegraph.marginals(graph.copy(), newest), rtol=1e-10)
+
+
+@pytest.mark.skipif("cholmod" not in sparse_cholesky.available_backends(), reason="no cvxopt")
+def test_covariances_from_a_simplicial_ldlt_factor(monkeypatch):
+    """With CHOLMOD set to simplicial factors (P A Pᵀ = L D Lᵀ), the solve's normal equations
+    still give the covariance: D enters the solves."""
+    from cvxopt import cholmod
+
+    graph = random_graph(SE3, 30, 12, seed=89)
+    monkeypatch.setitem(cholmod.options, "supernodal", 0)
+    posegraph.optimize(graph)
+    nodes = graph.node_ids[[4, 20]]
+    reused = posegraph.marginals(graph, nodes)
+    monkeypatch.delitem(cholmod.options, "supernodal")
+    np.testing.assert_allclose(reused, posegraph.marginals(graph.copy(), nodes), rtol=1e-10)
+
+
 @pytest.mark.parametrize("solved_columns", [SOLVED_COLUMNS, 0])
 def test_marginals_are_blocks_of_the_inverse_information(monkeypatch, solved_columns):
     """Against a dense inverse of H on a small graph (the library never forms one), by solves
