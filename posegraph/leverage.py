@@ -105,7 +105,7 @@ def _factorize(
     graph: PoseGraph,
     values: LieGroup,
     linear_solver: str,
-    covariance_of: list[np.ndarray] | None = None,
+    covariance_of: np.ndarray | None = None,
 ) -> _Factored:
     system, between = factorized_information(
         graph, values, linear_solver, covariance_of, regularize=True
@@ -202,10 +202,9 @@ def deleted_residuals(
     if edges is None:
         return Leverage(graph, values, probes, seed, linear_solver).deleted_residuals()
     edges = np.asarray(edges, dtype=np.int64)
-    d = graph.group.dof
-    ends = list(np.stack([graph.edges.i[edges], graph.edges.j[edges]], axis=1))
+    ends = np.stack([graph.edges.i[edges], graph.edges.j[edges]], axis=1)
     factored = _factorize(graph, values, linear_solver, covariance_of=ends)
-    covariances = np.array(joint_covariances(factored.system, ends)).reshape(-1, 2 * d, 2 * d)
+    covariances = joint_covariances(factored.system, ends)
     rows = np.concatenate([factored.rows_i[edges], factored.rows_j[edges]], axis=2)
     hat = rows @ covariances @ np.swapaxes(rows, 1, 2)  # Aₑ H⁻¹ Aₑᵀ
     return _deleted(factored.whitened[edges], hat)

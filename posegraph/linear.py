@@ -35,9 +35,10 @@ class BlockPattern:
     appended. If its nodes kept their blocks, it is grown instead of rebuilt (``self.grown``):
     only the appended edges' blocks are located and merged into its sorted block list.
 
-    ``covariance_of``: groups of nodes whose joint covariance will be read. The factorisation
-    is prepared for ``covariance_blocks``, and the blocks between the nodes of each group join
-    the pattern (as zeros where no edge fills them), which puts them in the factor's pattern.
+    ``covariance_of``: (G, k) groups of nodes whose joint covariance will be read. The
+    factorisation is prepared for ``covariance_blocks``, and the blocks between the nodes of
+    each group join the pattern (as zeros where no edge fills them), which puts them in the
+    factor's pattern.
     """
 
     def __init__(
@@ -48,7 +49,7 @@ class BlockPattern:
         prior_i: np.ndarray,
         d: int,
         backend: str = "auto",
-        covariance_of: list[np.ndarray] | None = None,
+        covariance_of: np.ndarray | None = None,
         previous: BlockPattern | None = None,
     ) -> None:
         self.d = d
@@ -56,7 +57,7 @@ class BlockPattern:
         self.num_blocks = int(block_of.max(initial=-1)) + 1
         self.size = self.num_blocks * d
         a, b, p = block_of[edge_i], block_of[edge_j], block_of[prior_i]
-        coupled = block_of[_pairs_within(covariance_of or [])]
+        coupled = block_of[_pairs_within(covariance_of)]
         # Every edge contributes blocks (a, a), (b, b), (a, b), (b, a); every prior (p, p).
         self.grown = (
             previous is not None
@@ -251,10 +252,12 @@ class BlockPattern:
         return scipy.sparse.csc_matrix((data, self.indices, self.indptr), (self.size, self.size))
 
 
-def _pairs_within(groups: list[np.ndarray]) -> np.ndarray:
-    """(2, k) node indices: every pair of distinct members of each group."""
-    pairs = [group[np.stack(np.triu_indices(group.size, 1))] for group in groups]
-    return np.concatenate([np.zeros((2, 0), dtype=np.int64), *pairs], axis=1)
+def _pairs_within(groups: np.ndarray | None) -> np.ndarray:
+    """(2, m) node indices: every pair of distinct members of each of (G, k) groups."""
+    if groups is None:
+        return np.zeros((2, 0), dtype=np.int64)
+    first, second = np.triu_indices(groups.shape[1], 1)
+    return np.stack([groups[:, first].ravel(), groups[:, second].ravel()])
 
 
 def free_block_index(num_nodes: int, held: np.ndarray) -> np.ndarray:
@@ -274,11 +277,11 @@ class NormalEquations(BlockPattern):
         graph: PoseGraph,
         held: np.ndarray,
         backend: str = "auto",
-        covariance_of: list[np.ndarray] | None = None,
+        covariance_of: np.ndarray | None = None,
         previous: NormalEquations | None = None,
     ) -> None:
-        """``covariance_of`` (groups of node indices) and ``previous`` (the system of this
-        graph before it grew): see ``BlockPattern``."""
+        """``covariance_of`` ((G, k) groups of node indices) and ``previous`` (the system of
+        this graph before it grew): see ``BlockPattern``."""
         self.dof = graph.group.dof
         block_of = free_block_index(graph.num_nodes, held)
         super().__init__(
@@ -322,7 +325,7 @@ def factorized_information(
     graph: PoseGraph,
     values: LieGroup,
     linear_solver: str = "auto",
-    covariance_of: list[np.ndarray] | None = None,
+    covariance_of: np.ndarray | None = None,
     regularize: bool = False,
     system: NormalEquations | None = None,
 ) -> tuple[NormalEquations, Linearization]:

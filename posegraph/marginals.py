@@ -21,24 +21,24 @@ from .linear import NormalEquations, factorized_information
 from .sparse_cholesky import NotPositiveDefinite, covariance_by_solves
 
 
-def joint_covariances(system: NormalEquations, groups: list[np.ndarray]) -> list[np.ndarray]:
-    """The joint covariance, (k·d, k·d), of each group of k node indices, from ``system``
-    factorised for the covariance of these groups (``covariance_of``); rows and columns of
-    held nodes are zero."""
+def joint_covariances(system: NormalEquations, groups: np.ndarray) -> np.ndarray:
+    """The joint covariances, (G, k·d, k·d), of G groups of k node indices (G, k), from
+    ``system`` factorised for the covariance of these groups (``covariance_of``); rows and
+    columns of held nodes are zero."""
     d = system.dof
-    slots, columns = [], []
-    for group in groups:
-        blocks = system.block_of[group]
-        free = np.flatnonzero(blocks >= 0)
-        slots.append((free[:, None] * d + np.arange(d)).ravel())
-        columns.append((blocks[free, None] * d + np.arange(d)).ravel())
-    covariances = [np.zeros((len(group) * d, len(group) * d)) for group in groups]
-    solved = [k for k, c in enumerate(columns) if c.size]
-    if solved:
-        blocks = system.cholesky.covariance_blocks([columns[k] for k in solved])
-        for k, block in zip(solved, blocks, strict=True):
-            covariances[k][np.ix_(slots[k], slots[k])] = block
-    return covariances
+    count, k = groups.shape
+    blocks = system.block_of[groups]
+    free = np.repeat(blocks >= 0, d, axis=1)
+    covariances = np.zeros((count, k * d, k * d))
+    if not free.any():
+        return covariances
+    columns = (blocks[:, :, None] * d + np.arange(d)).reshape(count, k * d)
+    # A held node's columns stand in for a free column of its group (else the first), then
+    # their rows and columns are zeroed.
+    stand_in = np.where(free.any(axis=1), columns[np.arange(count), free.argmax(axis=1)], 0)
+    columns = np.where(free, columns, stand_in[:, None])
+    covariances = system.cholesky.covariance_blocks(columns)
+    return covariances * (free[:, :, None] & free[:, None, :])
 
 
 def marginals(
@@ -72,7 +72,7 @@ def marginals(
     weights = None if graph.solution is None else graph.solution.edge_weights(graph.edges)
     if weights is not None and np.any(weights != 1.0):
         graph = graph.weighted(weights)
-    groups = [index] if joint else list(index[:, None])
+    groups = index[None, :] if joint else index[:, None]
     # Solves serve a few nodes with any factor, so the last least-squares solve's normal
     # equations do (a back end reading its newest pose's covariance after each step).
     few = covariance_by_solves(index.size * graph.group.dof)
@@ -87,7 +87,5 @@ def marginals(
             "by nothing (such as the rotation of a map held only by position priors), so its "
             "covariance is unbounded"
         ) from None
-    if joint:
-        return joint_covariances(system, groups)[0]
-    d = graph.group.dof
-    return np.array(joint_covariances(system, groups)).reshape(-1, d, d)
+    covariances = joint_covariances(system, groups)
+    return covariances[0] if joint else covariances

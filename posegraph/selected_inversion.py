@@ -125,15 +125,10 @@ def selected_inverse(factor: SupernodalFactor, columns: np.ndarray) -> np.ndarra
     return inverse
 
 
-def inverse_blocks(factor: SupernodalFactor, groups: list[np.ndarray]) -> list[np.ndarray]:
-    """The blocks (L Lᵀ)⁻¹[g, g] for groups g of column indices, every pair of which must lie in
-    L's pattern (``ValueError`` otherwise)."""
-    inverse = selected_inverse(factor, np.concatenate(groups))
-    a = np.concatenate([np.repeat(group, group.size) for group in groups])
-    b = np.concatenate([np.tile(group, group.size) for group in groups])
-    entries = inverse[factor.positions(np.maximum(a, b), np.minimum(a, b))]
-    ends = np.cumsum([group.size**2 for group in groups])
-    pieces = np.split(entries, ends[:-1])
-    return [
-        piece.reshape(group.size, group.size) for piece, group in zip(pieces, groups, strict=True)
-    ]
+def inverse_blocks(factor: SupernodalFactor, groups: np.ndarray) -> np.ndarray:
+    """The blocks (L Lᵀ)⁻¹[g, g], (G, c, c), for G groups g of c column indices (G, c), every
+    pair of which must lie in L's pattern (``ValueError`` otherwise)."""
+    inverse = selected_inverse(factor, groups.ravel())
+    rows, columns = np.broadcast_arrays(groups[:, :, None], groups[:, None, :])
+    lower, upper = np.maximum(rows, columns).ravel(), np.minimum(rows, columns).ravel()
+    return inverse[factor.positions(lower, upper)].reshape(rows.shape)

@@ -119,19 +119,20 @@ class CholmodCholesky:
         self._cholmod.solve(self._factor, b)
         return np.array(b).reshape(np.shape(rhs))
 
-    def covariance_blocks(self, groups: list[np.ndarray]) -> list[np.ndarray]:
-        """Blocks (A⁻¹)[g, g] for groups g of columns. Up to ``SOLVED_COLUMNS`` columns in all,
-        by sparse solves (their cost grows with each column); beyond, if this factoriser was
-        made ``supernodal`` (P A Pᵀ = L Lᵀ, A⁻¹ = Pᵀ (L Lᵀ)⁻¹ P), by selected inversion of L
-        (whose cost does not), for groups whose every pair lies in A's pattern."""
-        if self._supernodal and not covariance_by_solves(sum(g.size for g in groups)):
+    def covariance_blocks(self, groups: np.ndarray) -> np.ndarray:
+        """Blocks (A⁻¹)[g, g], (G, c, c), for G groups g of c columns (G, c). Up to
+        ``SOLVED_COLUMNS`` columns in all, by sparse solves (their cost grows with each column);
+        beyond, if this factoriser was made ``supernodal`` (P A Pᵀ = L Lᵀ, so A⁻¹ =
+        Pᵀ (L Lᵀ)⁻¹ P), by selected inversion of L (whose cost does not), for groups whose
+        every pair lies in A's pattern."""
+        if self._supernodal and not covariance_by_solves(groups.size):
             return self._selected_blocks(groups)
         return self._solved_blocks(groups)
 
-    def _solved_blocks(self, groups: list[np.ndarray]) -> list[np.ndarray]:
+    def _solved_blocks(self, groups: np.ndarray) -> np.ndarray:
         """Each block as Yᵀ D⁻¹ Y with Y = L⁻¹ P E_g (P A Pᵀ = L D Lᵀ, D = I for a supernodal
         factor): sparse solves with the unit columns, for a factor of either kind."""
-        columns = np.concatenate(groups)
+        columns = groups.ravel()
         unit = self._spmatrix(
             1.0, columns.tolist(), list(range(columns.size)), (self.size, columns.size)
         )
@@ -139,20 +140,11 @@ class CholmodCholesky:
         y = self._cholmod.spsolve(self._factor, y, sys=4)  # L⁻¹
         scaled = self._cholmod.spsolve(self._factor, y, sys=6)  # D⁻¹
         y, scaled = (self._scipy(m) for m in (y, scaled))
-        blocks, start = [], 0
-        for group in groups:
-            part = slice(start, start + group.size)
-            blocks.append((y[:, part].T @ scaled[:, part]).toarray())
-            start += group.size
-        return blocks
+        width = groups.shape[1]
+        parts = [slice(g * width, (g + 1) * width) for g in range(len(groups))]
+        return np.array([(y[:, part].T @ scaled[:, part]).toarray() for part in parts])
 
-    @staticmethod
-    def _scipy(matrix) -> scipy.sparse.csc_matrix:
-        """A cvxopt sparse matrix as scipy's."""
-        rows, cols = np.array(matrix.I).ravel(), np.array(matrix.J).ravel()
-        return scipy.sparse.csc_matrix((np.array(matrix.V).ravel(), (rows, cols)), matrix.size)
-
-    def _selected_blocks(self, groups: list[np.ndarray]) -> list[np.ndarray]:
+    def _selected_blocks(self, groups: np.ndarray) -> np.ndarray:
         """The blocks from the selected inverse of L (``posegraph.selected_inversion``).
         Reading L out (cvxopt's ``getfactor``) leaves CHOLMOD's factor spent: the next
         ``factorize`` analyses the pattern afresh."""
@@ -163,7 +155,13 @@ class CholmodCholesky:
         self._factor = None
         indptr, indices, data = (np.array(part).ravel() for part in factor.CCS)
         supernodal = SupernodalFactor(indptr.astype(np.int64), indices.astype(np.int64), data)
-        return inverse_blocks(supernodal, [place[group] for group in groups])
+        return inverse_blocks(supernodal, place[groups])
+
+    @staticmethod
+    def _scipy(matrix) -> scipy.sparse.csc_matrix:
+        """A cvxopt sparse matrix as scipy's."""
+        rows, cols = np.array(matrix.I).ravel(), np.array(matrix.J).ravel()
+        return scipy.sparse.csc_matrix((np.array(matrix.V).ravel(), (rows, cols)), matrix.size)
 
 
 class ScipyCholesky:
@@ -211,13 +209,14 @@ class ScipyCholesky:
         x[self._order] = self._lu.solve(rhs[self._order])
         return x
 
-    def covariance_blocks(self, groups: list[np.ndarray]) -> list[np.ndarray]:
-        """Blocks (A⁻¹)[g, g], by solving for the unit columns of each group."""
-        blocks = []
-        for group in groups:
-            unit = np.zeros((self._size, group.size))
+    def covariance_blocks(self, groups: np.ndarray) -> np.ndarray:
+        """Blocks (A⁻¹)[g, g], (G, c, c), by solving for the unit columns of each group."""
+        blocks = np.empty(groups.shape + groups.shape[1:])
+        unit = np.zeros((self._size, groups.shape[1]))
+        for block, group in zip(blocks, groups, strict=True):
             unit[group, np.arange(group.size)] = 1.0
-            blocks.append(self.solve(unit)[group])
+            block[:] = self.solve(unit)[group]
+            unit[group, np.arange(group.size)] = 0.0
         return blocks
 
 

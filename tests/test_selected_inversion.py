@@ -54,14 +54,16 @@ def test_blocks_of_chosen_columns_need_only_their_paths_to_the_root():
     lower = np.linalg.cholesky(matrix)
     far = np.argwhere(lower != 0)
     far_row, far_column = far[far[:, 0] - far[:, 1] > 20][0]  # a long-range entry of L
-    groups = [np.arange(3, 6), np.array([far_column, far_row]), np.array([40]), np.arange(3)]
-    for group, block in zip(groups, inverse_blocks(factor, groups), strict=True):
-        np.testing.assert_allclose(block, inverse[np.ix_(group, group)], rtol=1e-10, atol=1e-13)
+    for groups in (np.array([[3, 4, 5], [0, 1, 2]]), np.array([[far_column, far_row]]), [[40]]):
+        groups = np.asarray(groups)
+        for group, block in zip(groups, inverse_blocks(factor, groups), strict=True):
+            expected = inverse[np.ix_(group, group)]
+            np.testing.assert_allclose(block, expected, rtol=1e-10, atol=1e-13)
     assert factor.path_to_root(np.array([0])).size < factor.first.size / 2  # not the whole tree
     outside = np.argwhere(np.tril(lower) == 0)
     row, column = outside[outside[:, 0] > outside[:, 1]][0]
     with pytest.raises(ValueError, match=rf"entry \({row}, {column}\) is outside"):
-        inverse_blocks(factor, [np.array([column, row])])
+        inverse_blocks(factor, np.array([[column, row]]))
 
 
 @pytest.mark.skipif("cholmod" not in available_backends(), reason="cvxopt is not installed")
@@ -74,7 +76,7 @@ def test_cholmod_covariance_blocks_by_selected_inversion_then_factorize_again():
     cholesky = make_cholesky(pattern.indices, pattern.indptr, 300, "cholmod", for_covariance=True)
     cholesky.factorize(pattern.data)
     inverse = np.linalg.inv(matrix)
-    groups = [np.arange(k, k + 3) for k in range(0, 300, 3)]
+    groups = np.arange(300).reshape(100, 3)
     for group, block in zip(groups, cholesky.covariance_blocks(groups), strict=True):
         np.testing.assert_allclose(block, inverse[np.ix_(group, group)], rtol=1e-9, atol=1e-12)
     cholesky.factorize(2.0 * pattern.data)
