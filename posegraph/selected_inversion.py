@@ -7,7 +7,7 @@ part of Σ = A⁻¹ = L⁻ᵀ L⁻¹ from C on is the inverse of the trailing pa
     U = L_RC L_CC⁻¹,   Σ_RC = −Σ_RR U,   Σ_CC = L_CC⁻ᵀ L_CC⁻¹ − Uᵀ Σ_RC
 
 (Takahashi, Fagan & Chen 1973; in supernodal form, Lin, Yang, Meza, Lu, Ying & E 2011, "SelInv",
-ACM TOMS 37(4), §3). Σ_RR lies in the pattern of the columns R, which are ancestors of C in the
+ACM TOMS 37(4)). Σ_RR lies in the pattern of the columns R, which are ancestors of C in the
 elimination tree, so the supernodes are swept from the root down, and the entries in chosen
 columns need only the supernodes on their paths to the root. The work is that of the numeric
 factorisation; nothing of size n × n is formed.
