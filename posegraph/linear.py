@@ -332,7 +332,7 @@ def factorized_information(
     """The information matrix H = Σ Jᵀ Ω J of ``graph`` at ``values`` (priors included, gauge
     nodes held), assembled and factorised (with ``regularize``, by ``factorize_regularized``),
     with the between edges' linearisation; ``covariance_of``: see ``BlockPattern``. ``system``:
-    normal equations built for this graph's structure before, to fill instead of new ones."""
+    normal equations built for this graph's structure, to fill instead of new ones."""
     if system is None:
         system = NormalEquations(graph, graph.gauge_nodes(), linear_solver, covariance_of)
     between = linearize_between(values, graph.edges)

@@ -74,13 +74,14 @@ def marginals(
         graph = graph.weighted(weights)
     groups = index[None, :] if joint else index[:, None]
     # Solves serve a few nodes with any factor, so the last least-squares solve's normal
-    # equations do (a back end reading its newest pose's covariance after each step).
-    few = covariance_by_solves(index.size * graph.group.dof)
-    reused = graph.current_system(linear_solver) if few else None
+    # equations do (a back end reading its newest pose's covariance after each step); for
+    # selected inversion, new ones (supernodal, coupled) grow from their pattern.
+    solved = graph.current_system(linear_solver)
+    if solved is None or not covariance_by_solves(index.size * graph.group.dof):
+        held = graph.gauge_nodes()
+        solved = NormalEquations(graph, held, linear_solver, covariance_of=groups, previous=solved)
     try:
-        system, _ = factorized_information(
-            graph, values, linear_solver, covariance_of=groups, system=reused
-        )
+        system, _ = factorized_information(graph, values, system=solved)
     except NotPositiveDefinite:
         raise NotPositiveDefinite(
             "the information matrix is singular: some direction of the free nodes is measured "
