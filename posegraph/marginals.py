@@ -76,12 +76,12 @@ def marginals(
     # Solves serve a few nodes with any factor, so the last least-squares solve's normal
     # equations do (a back end reading its newest pose's covariance after each step); for
     # selected inversion, new ones (supernodal, coupled) grow from their pattern.
-    solved = graph.current_system(linear_solver)
-    if solved is None or not covariance_by_solves(index.size * graph.group.dof):
+    system = graph.current_system(linear_solver)
+    if system is None or not covariance_by_solves(index.size * graph.group.dof):
         held = graph.gauge_nodes()
-        solved = NormalEquations(graph, held, linear_solver, covariance_of=groups, previous=solved)
+        system = NormalEquations(graph, held, linear_solver, covariance_of=groups, previous=system)
     try:
-        system, _ = factorized_information(graph, values, system=solved)
+        system, _ = factorized_information(graph, values, system=system)
     except NotPositiveDefinite:
         raise NotPositiveDefinite(
             "the information matrix is singular: some direction of the free nodes is measured "
