@@ -6,8 +6,8 @@ covariance blocks of chosen nodes are blocks of H⁻¹, obtained from one sparse
 factorisation (never a dense inverse): by solves with the nodes' unit columns, or with CHOLMOD
 for more than a few nodes (``sparse_cholesky.SOLVED_COLUMNS``), by selected inversion of the
 factor on the paths from those nodes to the root of its elimination tree. A joint covariance
-puts the blocks between its nodes into H's pattern (as zeros), so that they lie in the
-factor's. Held nodes (the gauge) have zero covariance: everything is relative to them, as in
+of up to ``COUPLED_COLUMNS`` columns puts the blocks between its nodes into H's pattern (as
+zeros), so that they lie in the factor's; a larger one comes from solves. Held nodes (the gauge) have zero covariance: everything is relative to them, as in
 gtsam with a tight prior on the gauge node.
 """
 
@@ -73,13 +73,15 @@ def marginals(
     if weights is not None and np.any(weights != 1.0):
         graph = graph.weighted(weights)
     groups = index[None, :] if joint else index[:, None]
-    # Solves serve a few nodes with any factor, so the last least-squares solve's normal
-    # equations do (a back end reading its newest pose's covariance after each step); for
-    # selected inversion, new ones (supernodal, coupled) grow from their pattern.
-    system = graph.current_system(linear_solver)
-    if system is None or not covariance_by_solves(index.size * graph.group.dof):
-        held = graph.gauge_nodes()
+    # Solves serve any factor, so the last least-squares solve's normal equations do (a back
+    # end reading its newest pose's covariance after each step); for selected inversion, new
+    # ones (supernodal, coupled) grow from their pattern.
+    system, held = graph.current_system(linear_solver), graph.gauge_nodes()
+    d = graph.group.dof
+    if not covariance_by_solves(index.size * d, groups.shape[1] * d):
         system = NormalEquations(graph, held, linear_solver, covariance_of=groups, previous=system)
+    elif system is None:
+        system = NormalEquations(graph, held, linear_solver)
     try:
         system, _ = factorized_information(graph, values, system=system)
     except NotPositiveDefinite:

@@ -18,7 +18,7 @@ from posegraph.factors import between_squares, linearize_between, linearize_prio
 from posegraph.graph import PoseGraph
 from posegraph.lie import SE2, SE3, Sim3
 from posegraph.linear import NormalEquations
-from posegraph.sparse_cholesky import SOLVED_COLUMNS
+from posegraph.sparse_cholesky import COUPLED_COLUMNS, SOLVED_COLUMNS
 
 from .conftest import random_graph
 
@@ -456,11 +456,18 @@ def test_covariances_from_a_simplicial_ldlt_factor(monkeypatch):
     np.testing.assert_allclose(reused, posegraph.marginals(graph.copy(), nodes), rtol=1e-10)
 
 
-@pytest.mark.parametrize("solved_columns", [SOLVED_COLUMNS, 0])
-def test_marginals_are_blocks_of_the_inverse_information(monkeypatch, solved_columns):
-    """Against a dense inverse of H on a small graph (the library never forms one), by solves
-    and by selected inversion."""
+@pytest.mark.parametrize(
+    ("solved_columns", "coupled_columns"),
+    [(SOLVED_COLUMNS, COUPLED_COLUMNS), (0, COUPLED_COLUMNS), (0, 0)],
+    ids=["as set", "selected inversion", "joint by solves"],
+)
+def test_marginals_are_blocks_of_the_inverse_information(
+    monkeypatch, solved_columns, coupled_columns
+):
+    """Against a dense inverse of H on a small graph (the library never forms one), by solves,
+    by selected inversion, and with joint covariances too large to couple into the pattern."""
     monkeypatch.setattr(sparse_cholesky, "SOLVED_COLUMNS", solved_columns)
+    monkeypatch.setattr(sparse_cholesky, "COUPLED_COLUMNS", coupled_columns)
     graph = random_graph(SE3, 12, 8, seed=85, noise=0.05, priors=0)
     posegraph.optimize(graph)
     held = graph.gauge_nodes()
