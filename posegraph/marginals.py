@@ -7,8 +7,9 @@ factorisation (never a dense inverse): by solves with the nodes' unit columns, o
 for more than a few nodes (``sparse_cholesky.SOLVED_COLUMNS``), by selected inversion of the
 factor on the paths from those nodes to the root of its elimination tree. A joint covariance
 of up to ``COUPLED_COLUMNS`` columns puts the blocks between its nodes into H's pattern (as
-zeros), so that they lie in the factor's; a larger one comes from solves. Held nodes (the gauge) have zero covariance: everything is relative to them, as in
-gtsam with a tight prior on the gauge node.
+zeros), so that they lie in the factor's; a larger one comes from solves. Held nodes (the
+gauge) have zero covariance: everything is relative to them, as in gtsam with a tight prior on
+the gauge node.
 """
 
 from __future__ import annotations
