@@ -83,10 +83,10 @@ def optimize(
     optimised before: its nodes keep their values, and nodes added since without values are
     composed from them along a spanning tree and refined alone, the solved nodes held; in least
     squares it restarts from chordal relaxation instead (``RESTART``) when the measurements
-    added since disagree with the previous solution (``_warm_start``). On a fresh graph it picks chordal relaxation for graphs with loops, or odometry when ``robust``
-    is set (the odometry chain is trusted). While the structure is unchanged, the sparsity
-    pattern and symbolic factorisation of the last call are reused; ``summary.reused`` says
-    what was.
+    added since disagree with the previous solution (``_warm_start``). On a fresh graph it
+    picks chordal relaxation for graphs with loops, or odometry when ``robust`` is set (the
+    odometry chain is trusted). While the structure is unchanged, the sparsity pattern and
+    symbolic factorisation of the last call are reused; ``summary.reused`` says what was.
     ``robust``: None for least squares; "gnc" for graduated non-convexity with a truncated
     least-squares kernel (``posegraph.gnc``); or a kernel "huber", "cauchy", "geman-mcclure",
     "tukey", "dcs"; each optionally ":WIDTH" in Mahalanobis units (default ``GNC_QUANTILE`` or
