@@ -107,9 +107,8 @@ def _factorize(
     linear_solver: str,
     covariance_of: np.ndarray | None = None,
 ) -> _Factored:
-    system, between = factorized_information(
-        graph, values, linear_solver, covariance_of, regularize=True
-    )
+    system = NormalEquations(graph, graph.gauge_nodes(), linear_solver, covariance_of)
+    between = factorized_information(graph, values, system, regularize=True)
     prior_rows = (
         information_root(graph.priors.information) @ linearize_priors(values, graph.priors).jac_j
     )

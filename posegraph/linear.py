@@ -322,21 +322,14 @@ class NormalEquations(BlockPattern):
 
 
 def factorized_information(
-    graph: PoseGraph,
-    values: LieGroup,
-    linear_solver: str = "auto",
-    covariance_of: np.ndarray | None = None,
-    regularize: bool = False,
-    system: NormalEquations | None = None,
-) -> tuple[NormalEquations, Linearization]:
+    graph: PoseGraph, values: LieGroup, system: NormalEquations, regularize: bool = False
+) -> Linearization:
     """The information matrix H = Σ Jᵀ Ω J of ``graph`` at ``values`` (priors included, gauge
-    nodes held), assembled and factorised (with ``regularize``, by ``factorize_regularized``),
-    with the between edges' linearisation; ``covariance_of``: see ``BlockPattern``. ``system``:
-    normal equations built for this graph's structure, to fill instead of new ones."""
-    if system is None:
-        system = NormalEquations(graph, graph.gauge_nodes(), linear_solver, covariance_of)
+    nodes held), assembled into ``system`` (normal equations of this graph's structure) and
+    factorised (with ``regularize``, by ``factorize_regularized``); returns the between edges'
+    linearisation."""
     between = linearize_between(values, graph.edges)
     priors = linearize_priors(values, graph.priors)
     data, _ = system.assemble(between, graph.edges.information, priors, graph.priors.information)
     (system.factorize_regularized if regularize else system.factorize)(data)
-    return system, between
+    return between

@@ -84,7 +84,7 @@ def marginals(
     elif system is None:
         system = NormalEquations(graph, held, linear_solver)
     try:
-        system, _ = factorized_information(graph, values, system=system)
+        factorized_information(graph, values, system)
     except NotPositiveDefinite:
         raise NotPositiveDefinite(
             "the information matrix is singular: some direction of the free nodes is measured "

@@ -148,7 +148,7 @@ class CholmodCholesky:
         y = self._cholmod.spsolve(self._factor, unit, sys=7)  # P
         y = self._cholmod.spsolve(self._factor, y, sys=4)  # L⁻¹
         scaled = self._cholmod.spsolve(self._factor, y, sys=6)  # D⁻¹
-        y, scaled = (self._scipy(m) for m in (y, scaled))
+        y, scaled = (scipy.sparse.csc_matrix(self._compressed(m), m.size) for m in (y, scaled))
         width = groups.shape[1]
         parts = [slice(g * width, (g + 1) * width) for g in range(len(groups))]
         return np.array([(y[:, part].T @ scaled[:, part]).toarray() for part in parts])
@@ -162,15 +162,14 @@ class CholmodCholesky:
         place = np.array(columns).ravel().astype(np.int64)
         factor = self._cholmod.getfactor(self._factor)
         self._factor = None
-        indptr, indices, data = (np.array(part).ravel() for part in factor.CCS)
-        supernodal = SupernodalFactor(indptr.astype(np.int64), indices.astype(np.int64), data)
-        return inverse_blocks(supernodal, place[groups])
+        data, indices, indptr = self._compressed(factor)
+        return inverse_blocks(SupernodalFactor(indptr, indices, data), place[groups])
 
     @staticmethod
-    def _scipy(matrix) -> scipy.sparse.csc_matrix:
-        """A cvxopt sparse matrix as scipy's."""
-        rows, cols = np.array(matrix.I).ravel(), np.array(matrix.J).ravel()
-        return scipy.sparse.csc_matrix((np.array(matrix.V).ravel(), (rows, cols)), matrix.size)
+    def _compressed(matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(data, indices, indptr) of a cvxopt sparse matrix's compressed columns."""
+        indptr, indices, data = (np.array(part).ravel() for part in matrix.CCS)
+        return data, indices.astype(np.int64), indptr.astype(np.int64)
 
 
 class ScipyCholesky:
