@@ -106,6 +106,7 @@ def optimize(args: argparse.Namespace) -> int:
             callback=progress,
             robust=args.robust,
             robust_edges=args.robust_edges,
+            robust_priors=args.robust_priors,
         )
     summary = result.summary
     if progress.interrupted:

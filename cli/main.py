@@ -139,6 +139,11 @@ def _parser() -> argparse.ArgumentParser:
         help="edges the kernel applies to (default: loops, i.e. not between consecutive nodes)",
     )
     opt.add_argument(
+        "--robust-priors",
+        action="store_true",
+        help="apply the kernel to the priors too (absolute fixes such as GNSS)",
+    )
+    opt.add_argument(
         "--covariances",
         metavar="FILE",
         help="write every pose's marginal covariance at the optimum here (text: id, then the "

@@ -60,6 +60,7 @@ SUMMARY = {
         "input_error": {"type": ["number", "null"]},
         "robust": {"type": ["string", "null"]},
         "rejected_edges": {"type": "array", "items": {"type": "integer"}},
+        "rejected_priors": {"type": "array", "items": {"type": "integer"}},
         "history": {
             "type": "array",
             "items": {

@@ -23,9 +23,10 @@ def format_summary(
         + ", ".join(f"{name} {seconds:.3f}" for name, seconds in phases.items()),
     ]
     if summary.robust:
-        lines.append(
-            f"  robust          {summary.robust}: {len(summary.rejected_edges)} edge(s) rejected"
-        )
+        rejected = f"{len(summary.rejected_edges)} edge(s)"
+        if summary.rejected_priors:
+            rejected += f" and {len(summary.rejected_priors)} prior(s)"
+        lines.append(f"  robust          {summary.robust}: {rejected} rejected")
     lines.extend(f"  {what:<15} {path}" for what, path in written.items() if path)
     return "\n".join(lines)
 

@@ -1,9 +1,13 @@
-"""Seeded false loop closures for any graph, to test robust estimation.
+"""Seeded false loop closures and false pose fixes for any graph, to test robust estimation.
 
 ``add_false_loops`` joins random pairs of non-consecutive nodes with edges whose measurement is
 a random relative pose (uniform rotation; translation uniform within the extent of the graph's
 own edge translations) and whose information is copied from a random true edge, so that
 nothing but their inconsistency gives them away.
+
+``add_fixes`` adds absolute pose fixes (priors, as from GNSS with a heading) around the true
+poses, of which a share are false: a random pose within the extent of the true positions, with
+the same information as the true fixes.
 """
 
 from __future__ import annotations
@@ -12,8 +16,10 @@ import dataclasses
 
 import numpy as np
 
+from posegraph.factors import information_root
 from posegraph.graph import PoseGraph
 from posegraph.initialization import odometry_mask
+from posegraph.lie import LieGroup
 
 
 def add_false_loops(graph: PoseGraph, fraction: float, seed: int) -> tuple[PoseGraph, np.ndarray]:
@@ -55,3 +61,43 @@ def rejection_rates(
         float((is_rejected & false).sum() / max(false.sum(), 1)),
         float((is_rejected & true_loops).sum() / max(true_loops.sum(), 1)),
     )
+
+
+def add_fixes(
+    graph: PoseGraph,
+    truth: LieGroup,
+    every: int,
+    information: np.ndarray,
+    fraction: float,
+    seed: int,
+) -> tuple[PoseGraph, np.ndarray]:
+    """A copy of ``graph`` with a prior on every ``every``-th node (from the first), measured as
+    Z = X · Exp(n), n ~ N(0, Ω⁻¹), around the ``truth`` X, with the (d, d) ``information`` Ω;
+    ``fraction`` of them, at random, are false (a random pose, its position uniform within the
+    extent of the true positions). Also returns the mask of the false priors."""
+    if not 0 <= fraction < 1:
+        raise ValueError(f"the outlier fraction must be in [0, 1), not {fraction}")
+    rng = np.random.default_rng(seed)
+    nodes = np.arange(0, graph.num_nodes, every)
+    noise = rng.normal(size=(nodes.size, graph.group.dof)) @ information_root(
+        information, inverse=True
+    )
+    measurements = truth[nodes].retract(noise)
+    false = np.zeros(nodes.size, dtype=bool)
+    false[rng.choice(nodes.size, size=int(round(fraction * nodes.size)), replace=False)] = True
+    low, high = truth.translation.min(axis=0), truth.translation.max(axis=0)
+    random_poses = graph.group.sample(rng, (int(false.sum()),))
+    random_poses = dataclasses.replace(
+        random_poses, translation=rng.uniform(low, high, size=random_poses.translation.shape)
+    )
+    measurements = measurements.set_at(np.flatnonzero(false), random_poses)
+    fixed = graph.copy()
+    first = len(fixed.priors)
+    fixed.add_priors(
+        graph.node_ids[nodes],
+        measurements,
+        np.broadcast_to(information, (nodes.size,) + information.shape),
+    )
+    false_mask = np.zeros(len(fixed.priors), dtype=bool)
+    false_mask[first:] = false
+    return fixed, false_mask

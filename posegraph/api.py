@@ -7,6 +7,7 @@ import time
 
 import numpy as np
 
+from .anchoring import priors_as_edges
 from .factors import between_squares, chi2
 from .gnc import gnc_tls
 from .graph import PoseGraph, Solution, measured_dof
@@ -75,6 +76,7 @@ def optimize(
     callback: Callback | None = None,
     robust: str | None = None,
     robust_edges: str = "loops",
+    robust_priors: bool = False,
 ) -> Result:
     """Initialise the graph's values by ``init``, minimise its cost, and leave the solution in
     the graph (``graph.values``), so that calling again after adding nodes and edges warm-starts.
@@ -90,8 +92,9 @@ def optimize(
     ``robust``: None for least squares; "gnc" for graduated non-convexity with a truncated
     least-squares kernel (``posegraph.gnc``); or a kernel "huber", "cauchy", "geman-mcclure",
     "tukey", "dcs"; each optionally ":WIDTH" in Mahalanobis units (default ``GNC_QUANTILE`` or
-    ``KERNEL_QUANTILE``), applied to ``robust_edges``. The summary lists the rejected edges
-    (s = rᵀΩr > width²).
+    ``KERNEL_QUANTILE``), applied to ``robust_edges`` and, with ``robust_priors``, to the
+    priors too (fixes from GNSS, say; ``posegraph.anchoring``). The summary lists the rejected
+    edges and priors (s = rᵀΩr > width²).
 
     The graph's values are replaced by the initial ones; the result holds the optimum.
     """
@@ -117,34 +120,61 @@ def optimize(
         graph.set_values(initialize(graph, init))
     init_time = time.perf_counter() - start
 
-    rejected = np.zeros(0, dtype=np.int64)
-    weights = np.ones(graph.num_edges)
     if robust is None:
         system, previous = _cached_system(graph, options)
         result = solve(graph, options, callback, system=system, previous=previous)
         graph.last_result = (_structure_key(graph, options), result)
+        edge_weights, prior_weights = np.ones(graph.num_edges), np.ones(len(graph.priors))
     else:
-        name, width = kernel
-        if name in GNC_NAMES:
-            outcome = gnc_tls(graph, mask, width, options)
-            result, rejected = outcome.result, outcome.rejected
-            weights[rejected] = 0.0
-        else:
-            weighting = Robustifier(RobustKernel(name, width), mask)
-            result = solve(graph, options, callback, weighting=weighting)
-            s = between_squares(result.values, graph.edges)
-            rejected = np.flatnonzero(mask & (s > width**2))
-            _, weights = weighting.cost_and_weights(s)
-        result.summary.robust = f"{name}:{width:.6g}"
-        result.summary.rejected_edges = rejected.tolist()
+        result, edge_weights, prior_weights = _robust_solve(
+            graph, kernel, mask, robust_priors, options, callback
+        )
     result.summary.initialization = init
     result.summary.initialization_time = init_time
     result.summary.reused = reused + result.summary.reused
     result.summary.input_error = input_error
     result.summary.total_time = time.perf_counter() - start
     graph.set_values(result.values)
-    graph.solution = Solution(graph.edges, graph.priors, weights)
+    graph.solution = Solution(graph.edges, graph.priors, edge_weights, prior_weights)
     return result
+
+
+def _robust_solve(
+    graph: PoseGraph,
+    kernel: tuple[str, float],
+    mask: np.ndarray,
+    robust_priors: bool,
+    options: SolverOptions,
+    callback: Callback | None,
+) -> tuple[Result, np.ndarray, np.ndarray]:
+    """The robust branch of ``optimize``, from the graph's values: (result, edge weights, prior
+    weights), the weights those of the solution (0 where rejected). The summary records the
+    kernel and the rejected edges and priors. With ``robust_priors``, the priors are solved
+    for as edges from a held world node (``priors_as_edges``), in the kernel's class."""
+    work, measured = graph, mask
+    if robust_priors:
+        work = priors_as_edges(graph)
+        measured = np.concatenate([mask, np.ones(len(graph.priors), dtype=bool)])
+    name, width = kernel
+    if name in GNC_NAMES:
+        outcome = gnc_tls(work, measured, width, options)
+        result, rejected = outcome.result, outcome.rejected
+        weights = np.ones(work.num_edges)
+        weights[rejected] = 0.0
+    else:
+        weighting = Robustifier(RobustKernel(name, width), measured)
+        result = solve(work, options, callback, weighting=weighting)
+        s = between_squares(result.values, work.edges)
+        rejected = np.flatnonzero(measured & (s > width**2))
+        _, weights = weighting.cost_and_weights(s)
+    if robust_priors:  # the world node is last; the system and linearisation are work's
+        result = Result(result.values[: graph.num_nodes], result.summary)
+    count = graph.num_edges
+    result.summary.robust = f"{name}:{width:.6g}"
+    result.summary.rejected_edges = rejected[rejected < count].tolist()
+    result.summary.rejected_priors = (rejected[rejected >= count] - count).tolist()
+    prior_weights = weights[count:] if robust_priors else np.ones(len(graph.priors))
+    return result, weights[:count], prior_weights
 
 
 def _warm_start(graph: PoseGraph, options: SolverOptions, least_squares: bool) -> str:

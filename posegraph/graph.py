@@ -123,21 +123,29 @@ class EdgeSet:
 @dataclasses.dataclass(frozen=True, eq=False)
 class Solution:
     """What ``posegraph.optimize`` left in a graph's values: the optimum over these between
-    edges and priors, with each edge's weight there (1 in least squares; a robust kernel's
-    IRLS weight ρ′(s), 0 for an edge that graduated non-convexity rejected)."""
+    edges and priors, with each one's weight there (1 in least squares; a robust kernel's IRLS
+    weight ρ′(s), 0 for a measurement that graduated non-convexity rejected)."""
 
     edges: EdgeSet
     priors: EdgeSet
-    weights: np.ndarray
+    edge_weights: np.ndarray
+    prior_weights: np.ndarray
 
-    def edge_weights(self, edges: EdgeSet) -> np.ndarray:
-        """The weights of ``edges``: the solution's for the edges it was found over, if they
-        still come first and unchanged, and 1 for edges added since (1 for all if some were
-        removed or changed)."""
-        weights = np.ones(len(edges))
-        if edges.starts_with(self.edges):
-            weights[: len(self.edges)] = self.weights
-        return weights
+    def weights_for(self, edges: EdgeSet, priors: EdgeSet) -> tuple[np.ndarray, np.ndarray]:
+        """The weights of ``edges`` and of ``priors``: the solution's for the measurements it was
+        found over, if they still come first and unchanged, and 1 for those added since (1 for
+        all of a kind if some of it were removed or changed)."""
+        return (
+            _carried_weights(edges, self.edges, self.edge_weights),
+            _carried_weights(priors, self.priors, self.prior_weights),
+        )
+
+
+def _carried_weights(measured: EdgeSet, solved: EdgeSet, weights: np.ndarray) -> np.ndarray:
+    carried = np.ones(len(measured))
+    if measured.starts_with(solved):
+        carried[: len(solved)] = weights
+    return carried
 
 
 class PoseGraph:
@@ -394,14 +402,21 @@ class PoseGraph:
         other.structure_version += 1
         return other
 
-    def weighted(self, weights: np.ndarray) -> PoseGraph:
-        """A copy with each between edge's information times its weight; edges of weight 0
-        are left out (they would join components without information)."""
+    def weighted(self, weights: np.ndarray, prior_weights: np.ndarray | None = None) -> PoseGraph:
+        """A copy with each between edge's information times its weight, and each prior's times
+        its ``prior_weights`` (if given); those of weight 0 are left out (an edge would join
+        components without information)."""
         kept = weights > 0
         other = self.with_edges(kept)
         other.edges = dataclasses.replace(
             other.edges, information=other.edges.information * weights[kept, None, None]
         )
+        if prior_weights is not None:
+            kept = prior_weights > 0
+            priors = self.priors.subset(kept)
+            other.priors = dataclasses.replace(
+                priors, information=priors.information * prior_weights[kept, None, None]
+            )
         return other
 
     def subgraph(self, nodes: np.ndarray, edges: np.ndarray | None = None) -> PoseGraph:

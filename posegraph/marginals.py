@@ -52,10 +52,10 @@ def marginals(
     """Covariances of ``nodes`` (ids) at ``values`` (default: the graph's current values, which
     ``posegraph.optimize`` leaves at the optimum).
 
-    After a robust solve, each between edge's information counts with its weight in that
-    solution (``PoseGraph.solution``: IRLS weights ρ′(s), as gtsam's robust noise models
-    weigh it; edges rejected as outliers not at all), so a false loop closure cannot shrink
-    the covariances.
+    After a robust solve, each between edge's (and prior's) information counts with its weight
+    in that solution (``PoseGraph.solution``: IRLS weights ρ′(s), as gtsam's robust noise
+    models weigh it; measurements rejected as outliers not at all), so a false loop closure or
+    a false fix cannot shrink the covariances.
 
     After a least-squares ``posegraph.optimize``, while the graph's structure is unchanged, the
     covariances of a few nodes refill its normal equations instead of building new ones.
@@ -70,9 +70,10 @@ def marginals(
     elif values.batch_shape != (graph.num_nodes,):
         raise ValueError(f"values are one per node ({graph.num_nodes}), not {values.batch_shape}")
     index = graph.index(nodes)
-    weights = None if graph.solution is None else graph.solution.edge_weights(graph.edges)
-    if weights is not None and np.any(weights != 1.0):
-        graph = graph.weighted(weights)
+    if graph.solution is not None:
+        edge_weights, prior_weights = graph.solution.weights_for(graph.edges, graph.priors)
+        if np.any(edge_weights != 1.0) or np.any(prior_weights != 1.0):
+            graph = graph.weighted(edge_weights, prior_weights)
     groups = index[None, :] if joint else index[:, None]
     # Solves serve any factor, so the last least-squares solve's normal equations do (a back
     # end reading its newest pose's covariance after each step); for selected inversion, new

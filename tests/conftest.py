@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from posegraph_datasets.generators import manhattan_world
+from posegraph_datasets.outliers import add_fixes
 from posegraph_datasets.paths import gtsam_data_dir, shared_datasets_dir
 
 from posegraph.graph import PoseGraph
@@ -110,3 +112,10 @@ def gnss_track(group: type[LieGroup], heading: float, seed: int) -> tuple[PoseGr
     information[:d, :d] = np.eye(d)
     graph.add_priors(gnss, fixes, information)
     return graph, truth
+
+
+def city_with_fixes(fraction: float, seed: int) -> tuple[PoseGraph, np.ndarray]:
+    """A generated city with a pose fix (σ 0.5 m, 0.1 rad) on every 5th node, ``fraction`` of
+    them false, and the mask of the false ones."""
+    graph, truth = manhattan_world(num_poses=300, seed=67)
+    return add_fixes(graph, truth, 5, np.diag([4.0, 4.0, 100.0]), fraction, seed)

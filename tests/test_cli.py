@@ -17,8 +17,9 @@ from posegraph_cli.schema import SCHEMAS
 from posegraph_datasets import example
 from posegraph_datasets.paths import BENCHMARK_GRAPHS
 
-from posegraph.io import read_graph
+from posegraph.io import read_graph, write_graph
 
+from .conftest import city_with_fixes
 from .malformed import MALFORMED
 from .test_malformed import write_case
 
@@ -220,6 +221,21 @@ def test_a_map_away_from_the_origin_stays_where_the_file_has_it(tmp_path):
         assert out.positions()[1] == pytest.approx(
             [500000.5 + np.cos(0.3), 4000000.25 + np.sin(0.3)]
         )
+
+
+def test_robust_priors_reject_false_fixes_read_from_a_file(tmp_path):
+    """EDGE_PRIOR_SE2 lines, 30% of them false: `--robust gnc --robust-priors` names exactly the
+    false ones (by their order among the file's priors); `--robust gnc` alone rejects none."""
+    graph, false = city_with_fixes(0.3, seed=0)
+    path = tmp_path / "fixes.g2o"
+    write_graph(graph, str(path))
+    robust = run_json("optimize", path, "--robust", "gnc", "--robust-priors")["summary"]
+    assert robust["rejected_priors"] == np.flatnonzero(false).tolist()
+    assert robust["rejected_edges"] == []
+    loops_only = run_json("optimize", path, "--robust", "gnc")["summary"]
+    assert loops_only["rejected_priors"] == []
+    text = run("optimize", path, "--robust", "gnc", "--robust-priors").stdout
+    assert f"0 edge(s) and {false.sum()} prior(s) rejected" in text
 
 
 def test_a_closed_output_pipe_ends_quietly():

@@ -10,9 +10,11 @@ from posegraph_datasets.paths import BENCHMARK_GRAPHS, BEST_KNOWN_ERROR
 
 import posegraph
 from posegraph import gnc
-from posegraph.api import robust_mask
+from posegraph.anchoring import priors_as_edges
+from posegraph.api import KERNEL_QUANTILE, robust_mask
 from posegraph.chordal import chordal_values
 from posegraph.evaluation import evaluate
+from posegraph.factors import between_squares, chi2, prior_residuals, weighted_squares
 from posegraph.gnc import gnc_tls
 from posegraph.graph import PoseGraph
 from posegraph.initialization import choose, initialize
@@ -20,7 +22,7 @@ from posegraph.lie import SE2, SE3, Sim3
 from posegraph.robust import KERNELS, RobustKernel, default_width, tls_gnc_weights
 from posegraph.trajectory_io import Trajectory, as_se3
 
-from .conftest import gnss_track, random_graph, union
+from .conftest import city_with_fixes, gnss_track, random_graph, union
 
 
 def _noise_free(graph: PoseGraph, truth) -> PoseGraph:
@@ -339,3 +341,76 @@ def test_irls_kernels_resist_false_loops(kernel):
     assert error(robust) < 0.2 * error(plain)
     assert robust.summary.robust.startswith(kernel)
     assert set(np.flatnonzero(false)) <= set(robust.summary.rejected_edges)
+
+
+def without_false_fixes(graph: PoseGraph, false: np.ndarray) -> PoseGraph:
+    clean = graph.copy()
+    clean.priors = clean.priors.subset(~false)
+    clean.solution = None
+    return clean
+
+
+def test_priors_as_edges_from_a_held_world_node_keep_the_cost_and_the_optimum():
+    graph, _ = city_with_fixes(0.0, seed=0)
+    anchored = priors_as_edges(graph)
+    assert len(anchored.priors) == 0 and anchored.fixed[-1] and not anchored.fixed[:-1].any()
+    assert chi2(anchored.values, anchored.edges, anchored.priors) == pytest.approx(
+        chi2(graph.values, graph.edges, graph.priors), rel=1e-12
+    )
+    direct = posegraph.optimize(graph.copy(), init="file")
+    as_edges = posegraph.optimize(anchored, init="file")
+    assert as_edges.summary.final_error == pytest.approx(direct.summary.final_error, rel=1e-9)
+    assert as_edges.summary.num_variables == direct.summary.num_variables
+    np.testing.assert_allclose(
+        as_edges.values[:-1].as_matrix(), direct.values.as_matrix(), atol=1e-7
+    )
+    np.testing.assert_array_equal(as_edges.values[-1].as_matrix(), np.eye(3))
+
+
+@pytest.mark.parametrize("fraction", [0.1, 0.3])
+def test_gnc_rejects_false_fixes_with_robust_priors(fraction):
+    """GNSS-like fixes, some false: with ``robust_priors`` GNC rejects exactly the false ones
+    and ends at the solution without them; applied to loops only, the false fixes pull the map
+    away."""
+    graph, false = city_with_fixes(fraction, seed=0)
+    clean = posegraph.optimize(without_false_fixes(graph, false))
+    result = posegraph.optimize(graph, robust="gnc", robust_priors=True)
+    assert result.summary.rejected_priors == np.flatnonzero(false).tolist()
+    assert result.summary.rejected_edges == []
+    np.testing.assert_array_equal(graph.solution.prior_weights, (~false).astype(float))
+    error = lambda r: np.linalg.norm(r.values.translation - clean.values.translation, axis=1).mean()  # noqa: E731
+    assert error(result) < 1e-3
+    loops_only = posegraph.optimize(graph.copy(), robust="gnc")
+    assert loops_only.summary.rejected_priors == [] and error(loops_only) > 0.1
+
+
+def test_irls_kernels_weigh_priors_with_robust_priors():
+    """Huber on the loops and the priors: the final error is ½ (Σ ρ(s) over the loops and the
+    priors + Σ s over the odometry) at the solution, and each prior's weight is ρ′(s) there."""
+    graph, false = city_with_fixes(0.3, seed=1)
+    result = posegraph.optimize(graph, robust="huber", robust_priors=True)
+    kernel = RobustKernel("huber", default_width(3, KERNEL_QUANTILE))
+    loops = robust_mask(graph, "loops")
+    edge_squares = between_squares(result.values, graph.edges)
+    prior_squares = weighted_squares(
+        prior_residuals(result.values, graph.priors), graph.priors.information
+    )
+    expected = 0.5 * (
+        np.where(loops, kernel.cost(edge_squares), edge_squares).sum()
+        + kernel.cost(prior_squares).sum()
+    )
+    assert result.summary.final_error == pytest.approx(expected, rel=1e-9)
+    np.testing.assert_allclose(
+        graph.solution.prior_weights, kernel.weight(prior_squares), rtol=1e-6
+    )
+    weights = graph.solution.prior_weights
+    assert weights[false].max() < 0.5 < 0.8 < weights[~false].min()
+    assert set(np.flatnonzero(false)) <= set(result.summary.rejected_priors)
+
+
+def test_marginals_after_robust_priors_leave_the_rejected_fixes_out():
+    graph, false = city_with_fixes(0.3, seed=0)
+    posegraph.optimize(graph, robust="gnc", robust_priors=True)
+    nodes = graph.node_ids[[0, 150, 299]]
+    expected = posegraph.marginals(without_false_fixes(graph, false), nodes, values=graph.values)
+    np.testing.assert_allclose(posegraph.marginals(graph, nodes), expected, rtol=1e-9)

@@ -49,6 +49,8 @@ class Summary:
     """The robust kernel and width used ("gnc:3.36", "cauchy:2"), or None for least squares."""
     rejected_edges: list[int] = dataclasses.field(default_factory=list)
     """Indices of the between edges rejected as outliers (robust runs only)."""
+    rejected_priors: list[int] = dataclasses.field(default_factory=list)
+    """Indices of the priors rejected as outliers (robust runs with ``robust_priors`` only)."""
 
     @property
     def initial_chi2(self) -> float:
@@ -83,6 +85,7 @@ class Summary:
             "input_error": self.input_error,
             "robust": self.robust,
             "rejected_edges": list(self.rejected_edges),
+            "rejected_priors": list(self.rejected_priors),
             "history": [dataclasses.asdict(r) for r in self.iterations],
         }
 
