@@ -49,11 +49,12 @@ def ground_truth(name: str) -> PoseGraph | None:
 
 
 def with_truth(name: str, graph: PoseGraph) -> tuple[str, PoseGraph, LieGroup]:
-    """(measurements, graph, true poses): sphere2500's own measurements and gtsam's ground
-    truth, or the graph resimulated around its outlier-free solution, which is then the truth."""
+    """(measurements, graph, true poses in its node order): sphere2500's own measurements and
+    gtsam's ground truth, or the graph resimulated around its outlier-free solution, which is
+    then the truth."""
     truth = ground_truth(name)
     if truth is not None:
-        return "data", graph, truth.values
+        return "data", graph, truth.values_of(graph.node_ids)
     solution = optimize(graph.copy()).values
     return "resimulated", resimulate(graph, solution, seed=0), solution
 
@@ -62,8 +63,8 @@ def cases(name: str) -> list[tuple[str, PoseGraph, Trajectory | None]]:
     """(measurements, graph, ground truth or None) for the benchmark graph ``name``."""
     graph = read_graph(str(shared_datasets_dir() / f"{name}.g2o")).graph
     label, measured, truth = with_truth(name, graph)
-    simulated = [] if measured is graph else [("data", graph, None)]
-    return simulated + [(label, measured, _trajectory(measured, truth))]
+    own = [] if measured is graph else [("data", graph, None)]
+    return own + [(label, measured, _trajectory(measured, truth))]
 
 
 def run(names: list[str], fractions: list[float], seeds: list[int]) -> str:
