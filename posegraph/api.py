@@ -151,8 +151,9 @@ def _robust_solve(
     weights), the weights those of the solution (0 where rejected). The summary records the
     kernel and the rejected edges and priors. With ``robust_priors``, the priors are solved
     for as edges from a held world node (``priors_as_edges``), in the kernel's class."""
+    anchored = robust_priors and len(graph.priors) > 0
     work, measured = graph, mask
-    if robust_priors:
+    if anchored:
         work = priors_as_edges(graph)
         measured = np.concatenate([mask, np.ones(len(graph.priors), dtype=bool)])
     name, width = kernel
@@ -167,13 +168,13 @@ def _robust_solve(
         s = between_squares(result.values, work.edges)
         rejected = np.flatnonzero(measured & (s > width**2))
         _, weights = weighting.cost_and_weights(s)
-    if robust_priors:  # the world node is last; the system and linearisation are work's
+    if anchored:  # the world node is last; the system and linearisation are work's
         result = Result(result.values[: graph.num_nodes], result.summary)
     count = graph.num_edges
     result.summary.robust = f"{name}:{width:.6g}"
     result.summary.rejected_edges = rejected[rejected < count].tolist()
     result.summary.rejected_priors = (rejected[rejected >= count] - count).tolist()
-    prior_weights = weights[count:] if robust_priors else np.ones(len(graph.priors))
+    prior_weights = weights[count:] if anchored else np.ones(len(graph.priors))
     return result, weights[:count], prior_weights
 
 

@@ -384,6 +384,20 @@ def test_gnc_rejects_false_fixes_with_robust_priors(fraction):
     assert loops_only.summary.rejected_priors == [] and error(loops_only) > 0.1
 
 
+def test_robust_priors_on_a_graph_without_priors_change_nothing():
+    """Nothing to anchor: an empty graph has nothing to optimise (the world node's id was taken
+    from the largest of no ids), and a graph without priors is solved as without the flag."""
+    empty = posegraph.optimize(PoseGraph("SE2"), robust="gnc", robust_priors=True)
+    assert empty.summary.termination == "nothing to optimise"
+    graph, _ = manhattan_world(num_poses=60, seed=5)
+    corrupted, false = add_false_loops(graph, 0.2, seed=0)
+    flagged = posegraph.optimize(corrupted.copy(), robust="gnc", robust_priors=True)
+    plain = posegraph.optimize(corrupted.copy(), robust="gnc")
+    assert flagged.summary.rejected_edges == plain.summary.rejected_edges
+    assert flagged.summary.rejected_priors == []
+    np.testing.assert_array_equal(flagged.values.as_matrix(), plain.values.as_matrix())
+
+
 def test_irls_kernels_weigh_priors_with_robust_priors():
     """Huber on the loops and the priors: the final error is ½ (Σ ρ(s) over the loops and the
     priors + Σ s over the odometry) at the solution, and each prior's weight is ρ′(s) there."""
