@@ -119,6 +119,14 @@ class EdgeSet:
     def subset(self, keep: np.ndarray) -> EdgeSet:
         return EdgeSet(self.i[keep], self.j[keep], self.measurements[keep], self.information[keep])
 
+    def weighted(self, weights: np.ndarray) -> EdgeSet:
+        """The edges of positive weight, each information matrix times its weight."""
+        kept = weights > 0
+        kept_edges = self.subset(kept)
+        return dataclasses.replace(
+            kept_edges, information=kept_edges.information * weights[kept, None, None]
+        )
+
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class Solution:
@@ -406,17 +414,11 @@ class PoseGraph:
         """A copy with each between edge's information times its weight, and each prior's times
         its ``prior_weights`` (if given); those of weight 0 are left out (an edge would join
         components without information)."""
-        kept = weights > 0
-        other = self.with_edges(kept)
-        other.edges = dataclasses.replace(
-            other.edges, information=other.edges.information * weights[kept, None, None]
-        )
+        other = self.copy()
+        other.edges = self.edges.weighted(weights)
         if prior_weights is not None:
-            kept = prior_weights > 0
-            priors = self.priors.subset(kept)
-            other.priors = dataclasses.replace(
-                priors, information=priors.information * prior_weights[kept, None, None]
-            )
+            other.priors = self.priors.weighted(prior_weights)
+        other.structure_version += 1
         return other
 
     def subgraph(self, nodes: np.ndarray, edges: np.ndarray | None = None) -> PoseGraph:
