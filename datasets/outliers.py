@@ -25,8 +25,7 @@ from posegraph.lie import LieGroup
 def add_false_loops(graph: PoseGraph, fraction: float, seed: int) -> tuple[PoseGraph, np.ndarray]:
     """A copy of ``graph`` in which false loops make up ``fraction`` of all loop closures
     (edges between non-consecutive nodes), and the mask of the false edges."""
-    if not 0 <= fraction < 1:
-        raise ValueError(f"the outlier fraction must be in [0, 1), not {fraction}")
+    _check_fraction(fraction)
     rng = np.random.default_rng(seed)
     true_loops = int((~odometry_mask(graph)).sum())
     count = int(round(fraction / (1.0 - fraction) * true_loops))
@@ -36,16 +35,29 @@ def add_false_loops(graph: PoseGraph, fraction: float, seed: int) -> tuple[PoseG
     keep = np.abs(i - j) > 1
     i, j = i[keep][:count], j[keep][:count]
     extent = np.abs(graph.edges.measurements.translation).max(axis=0)
-    random_poses = graph.group.sample(rng, (i.size,))
-    measurements = dataclasses.replace(
-        random_poses, translation=rng.uniform(-extent, extent, size=(i.size, extent.size))
-    )
+    measurements = _random_poses(graph.group, rng, i.size, -extent, extent)
     information = graph.edges.information[rng.integers(0, graph.num_edges, size=i.size)]
     corrupted = graph.copy()
     corrupted.add_edges(graph.node_ids[i], graph.node_ids[j], measurements, information)
     false_mask = np.zeros(corrupted.num_edges, dtype=bool)
     false_mask[graph.num_edges :] = True
     return corrupted, false_mask
+
+
+def _check_fraction(fraction: float) -> None:
+    if not 0 <= fraction < 1:
+        raise ValueError(f"the outlier fraction must be in [0, 1), not {fraction}")
+
+
+def _random_poses(
+    group: type[LieGroup], rng: np.random.Generator, count: int, low: np.ndarray, high: np.ndarray
+) -> LieGroup:
+    """``count`` poses of uniform rotation, their translation uniform between ``low`` and
+    ``high``."""
+    poses = group.sample(rng, (count,))
+    return dataclasses.replace(
+        poses, translation=rng.uniform(low, high, size=poses.translation.shape)
+    )
 
 
 def rejection_rates(
@@ -75,8 +87,7 @@ def add_fixes(
     Z = X · Exp(n), n ~ N(0, Ω⁻¹), around the ``truth`` X, with the (d, d) ``information`` Ω;
     ``fraction`` of them, at random, are false (a random pose, its position uniform within the
     extent of the true positions). Also returns the mask of the false priors."""
-    if not 0 <= fraction < 1:
-        raise ValueError(f"the outlier fraction must be in [0, 1), not {fraction}")
+    _check_fraction(fraction)
     rng = np.random.default_rng(seed)
     nodes = np.arange(0, graph.num_nodes, every)
     noise = rng.normal(size=(nodes.size, graph.group.dof)) @ information_root(
@@ -86,10 +97,7 @@ def add_fixes(
     false = np.zeros(nodes.size, dtype=bool)
     false[rng.choice(nodes.size, size=int(round(fraction * nodes.size)), replace=False)] = True
     low, high = truth.translation.min(axis=0), truth.translation.max(axis=0)
-    random_poses = graph.group.sample(rng, (int(false.sum()),))
-    random_poses = dataclasses.replace(
-        random_poses, translation=rng.uniform(low, high, size=random_poses.translation.shape)
-    )
+    random_poses = _random_poses(graph.group, rng, int(false.sum()), low, high)
     measurements = measurements.set_at(np.flatnonzero(false), random_poses)
     fixed = graph.copy()
     first = len(fixed.priors)
