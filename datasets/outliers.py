@@ -44,6 +44,15 @@ def add_false_loops(graph: PoseGraph, fraction: float, seed: int) -> tuple[PoseG
     return corrupted, false_mask
 
 
+def without_priors(graph: PoseGraph, false: np.ndarray) -> PoseGraph:
+    """A copy of ``graph`` without the priors where ``false`` holds, and without its solution
+    (the reference that robust estimation is measured against)."""
+    clean = graph.copy()
+    clean.priors = clean.priors.subset(~false)
+    clean.solution = None
+    return clean
+
+
 def _check_fraction(fraction: float) -> None:
     if not 0 <= fraction < 1:
         raise ValueError(f"the outlier fraction must be in [0, 1), not {fraction}")

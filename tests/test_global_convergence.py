@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from posegraph_datasets.generators import manhattan_world, resimulate, sphere
-from posegraph_datasets.outliers import add_false_loops, rejection_rates
+from posegraph_datasets.outliers import add_false_loops, rejection_rates, without_priors
 from posegraph_datasets.paths import BENCHMARK_GRAPHS, BEST_KNOWN_ERROR
 
 import posegraph
@@ -343,13 +343,6 @@ def test_irls_kernels_resist_false_loops(kernel):
     assert set(np.flatnonzero(false)) <= set(robust.summary.rejected_edges)
 
 
-def without_false_fixes(graph: PoseGraph, false: np.ndarray) -> PoseGraph:
-    clean = graph.copy()
-    clean.priors = clean.priors.subset(~false)
-    clean.solution = None
-    return clean
-
-
 def test_priors_as_edges_from_a_held_world_node_keep_the_cost_and_the_optimum():
     graph, _ = city_with_fixes(0.0, seed=0)
     anchored = priors_as_edges(graph)
@@ -373,7 +366,7 @@ def test_gnc_rejects_false_fixes_with_robust_priors(fraction):
     and ends at the solution without them; applied to loops only, the false fixes pull the map
     away."""
     graph, false = city_with_fixes(fraction, seed=0)
-    clean = posegraph.optimize(without_false_fixes(graph, false))
+    clean = posegraph.optimize(without_priors(graph, false))
     result = posegraph.optimize(graph, robust="gnc", robust_priors=True)
     assert result.summary.rejected_priors == np.flatnonzero(false).tolist()
     assert result.summary.rejected_edges == []
@@ -426,5 +419,5 @@ def test_marginals_after_robust_priors_leave_the_rejected_fixes_out():
     graph, false = city_with_fixes(0.3, seed=0)
     posegraph.optimize(graph, robust="gnc", robust_priors=True)
     nodes = graph.node_ids[[0, 150, 299]]
-    expected = posegraph.marginals(without_false_fixes(graph, false), nodes, values=graph.values)
+    expected = posegraph.marginals(without_priors(graph, false), nodes, values=graph.values)
     np.testing.assert_allclose(posegraph.marginals(graph, nodes), expected, rtol=1e-9)

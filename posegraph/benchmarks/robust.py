@@ -24,7 +24,12 @@ import time
 
 import numpy as np
 from posegraph_datasets.generators import resimulate
-from posegraph_datasets.outliers import add_false_loops, add_fixes, rejection_rates
+from posegraph_datasets.outliers import (
+    add_false_loops,
+    add_fixes,
+    rejection_rates,
+    without_priors,
+)
 from posegraph_datasets.paths import gtsam_data_dir, shared_datasets_dir
 
 from ..api import optimize
@@ -117,8 +122,7 @@ def run_fixes(names: list[str], fractions: list[float], seeds: list[int]) -> str
         for fraction in fractions:
             for seed in seeds:
                 fixed, false = add_fixes(measured, truth, 10, information, fraction, seed)
-                clean = fixed.copy()
-                clean.priors = clean.priors.subset(~false)
+                clean = without_priors(fixed, false)
                 ate_clean = evaluate(_trajectory(clean, optimize(clean).values), reference)
                 start = time.perf_counter()
                 result = optimize(fixed, robust="gnc", robust_priors=True)
