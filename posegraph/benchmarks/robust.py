@@ -15,11 +15,15 @@ manhattan ship none, so each is run twice:
 With ``--fixes``, the same graphs (sphere2500's own, intel and manhattan resimulated) get pose
 fixes (priors) around the truth instead, a share of them false, and robust mode covers the
 priors (``run_fixes``).
+
+With ``--gtsam``, each row also runs gtsam's own GNC (``GncLMOptimizer`` with its TLS loss) on
+the same graph, set up as posegraph's robust mode is (``gtsam_gnc``), side by side.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import time
 
 import numpy as np
@@ -32,9 +36,10 @@ from posegraph_datasets.outliers import (
 )
 from posegraph_datasets.paths import gtsam_data_dir, shared_datasets_dir
 
-from ..api import optimize
+from ..api import GNC_QUANTILE, optimize
 from ..evaluation import evaluate
 from ..graph import PoseGraph
+from ..initialization import initialize, odometry_mask
 from ..io import read_graph
 from ..lie import LieGroup
 from ..trajectory_io import Trajectory, as_se3
@@ -43,6 +48,36 @@ from .table import MarkdownTable
 
 def _trajectory(graph: PoseGraph, values: LieGroup) -> Trajectory:
     return Trajectory(graph.node_ids.astype(float), as_se3(values))
+
+
+@dataclasses.dataclass(frozen=True)
+class Run:
+    """One robust solve of a benchmark graph."""
+
+    values: LieGroup
+    rejected_edges: np.ndarray
+    rejected_priors: np.ndarray
+    seconds: float
+
+
+def posegraph_gnc(graph: PoseGraph, robust_priors: bool = False) -> Run:
+    """``optimize(robust="gnc")`` on a copy of ``graph``, timed with its initialisation."""
+    work = graph.copy()
+    start = time.perf_counter()
+    result = optimize(work, robust="gnc", robust_priors=robust_priors)
+    seconds = time.perf_counter() - start
+    summary = result.summary
+    return Run(result.values, summary.rejected_edges, summary.rejected_priors, seconds)
+
+
+def gtsam_gnc(graph: PoseGraph, robust_priors: bool = False) -> Run:
+    """gtsam's GNC with its TLS loss set up as posegraph's robust mode is: from the odometry
+    chain, with the loop closures (and the priors, with ``robust_priors``) under the kernel of
+    the same quantile (``posegraph.validation.gtsam_bridge.gnc_tls``)."""
+    from ..validation.gtsam_bridge import gnc_tls
+
+    start = initialize(graph, "odometry")
+    return Run(*gnc_tls(graph, start, ~odometry_mask(graph), robust_priors, GNC_QUANTILE))
 
 
 def ground_truth(name: str) -> PoseGraph | None:
@@ -72,45 +107,90 @@ def cases(name: str) -> list[tuple[str, PoseGraph, Trajectory | None]]:
     return own + [(label, measured, _trajectory(measured, truth))]
 
 
-def run(names: list[str], fractions: list[float], seeds: list[int]) -> str:
+def _solvers(gtsam: bool) -> list:
+    return [posegraph_gnc, gtsam_gnc] if gtsam else [posegraph_gnc]
+
+
+def _header(shared: str, scored: str, gtsam: bool) -> str:
+    """The columns shared by a row's solves, then each solve's (gtsam's prefixed), then with
+    ``gtsam`` posegraph's time over gtsam's."""
+    if not gtsam:
+        return f"{shared} | {scored}"
+    prefixed = " | ".join(f"gtsam {column}" for column in scored.split(" | "))
+    return f"{shared} | {scored} | {prefixed} | time ratio"
+
+
+def _time_ratio(runs: list[Run]) -> list[str]:
+    return [f"{runs[0].seconds / runs[1].seconds:.2f}"] if len(runs) == 2 else []
+
+
+def _loop_scores(
+    graph: PoseGraph, false: np.ndarray, run: Run, reference: Trajectory, ate_clean: float | None
+) -> str:
+    """false rejected | true wrongly rejected | ATE | ATE ratio (– without a truth) | time."""
+    false_rejected, true_rejected = rejection_rates(graph, false, run.rejected_edges)
+    ate = evaluate(_trajectory(graph, run.values), reference).ate.rmse
+    ratio = "–" if ate_clean is None else f"{ate / ate_clean:.3f}"
+    return f"{false_rejected:.1%} | {true_rejected:.2%} | {ate:.4g} | {ratio} | {run.seconds:.1f}"
+
+
+def run(names: list[str], fractions: list[float], seeds: list[int], gtsam: bool = False) -> str:
+    """The false-loop table; with ``gtsam``, gtsam's GNC on each graph too."""
     table = MarkdownTable(
-        "graph | measurements | false loops | seed | false rejected | true wrongly rejected "
-        "| ATE robust | ATE outlier-free | ATE vs | ratio | time (s)",
+        _header(
+            "graph | measurements | false loops | seed | ATE outlier-free | ATE vs",
+            "false rejected | true wrongly rejected | ATE robust | ratio | time (s)",
+            gtsam,
+        ),
         echo=True,
     )
     for name in names:
         for label, graph, truth in cases(name):
             clean = _trajectory(graph, optimize(graph.copy()).values)
-            reference = truth or clean
-            ate_clean = evaluate(clean, truth).ate.rmse if truth else 0.0
+            ate_clean = evaluate(clean, truth).ate.rmse if truth else None
+            against = "ground truth" if truth else "outlier-free"
             for fraction in fractions:
                 for seed in seeds:
                     corrupted, false = add_false_loops(graph, fraction, seed)
-                    start = time.perf_counter()
-                    result = optimize(corrupted, robust="gnc")
-                    elapsed = time.perf_counter() - start
-                    false_rejected, true_rejected = rejection_rates(
-                        corrupted, false, result.summary.rejected_edges
-                    )
-                    ate = evaluate(_trajectory(corrupted, result.values), reference).ate.rmse
-                    ratio = f"{ate / ate_clean:.3f}" if truth else "–"
-                    against = "ground truth" if truth else "outlier-free"
-                    table.add(
-                        f"{name} | {label} | {fraction:.0%} | {seed} | {false_rejected:.1%} "
-                        f"| {true_rejected:.2%} | {ate:.4g} | {ate_clean:.4g} | {against} "
-                        f"| {ratio} | {elapsed:.1f}"
-                    )
+                    runs = [solver(corrupted) for solver in _solvers(gtsam)]
+                    cells = [
+                        f"{name} | {label} | {fraction:.0%} | {seed} "
+                        f"| {ate_clean or 0.0:.4g} | {against}"
+                    ]
+                    cells += [
+                        _loop_scores(corrupted, false, r, truth or clean, ate_clean) for r in runs
+                    ]
+                    table.add(" | ".join(cells + _time_ratio(runs)))
     return str(table)
 
 
-def run_fixes(names: list[str], fractions: list[float], seeds: list[int]) -> str:
+def _fix_scores(
+    graph: PoseGraph, false: np.ndarray, run: Run, reference: Trajectory, ate_clean: float
+) -> str:
+    """false rejected | true wrongly rejected | loops rejected | ATE | ATE ratio | time."""
+    rejected = np.zeros(false.size, dtype=bool)
+    rejected[run.rejected_priors] = True
+    ate = evaluate(_trajectory(graph, run.values), reference).ate.rmse
+    return (
+        f"{rejected[false].mean():.1%} | {rejected[~false].mean():.2%} "
+        f"| {len(run.rejected_edges)} | {ate:.4g} | {ate / ate_clean:.3f} | {run.seconds:.1f}"
+    )
+
+
+def run_fixes(
+    names: list[str], fractions: list[float], seeds: list[int], gtsam: bool = False
+) -> str:
     """Pose fixes (σ 0.5 m and 0.05 rad) on every 10th node around the true poses, a share of
     them false, with ``robust="gnc", robust_priors=True``: the share of false fixes rejected,
     of true ones wrongly rejected, and the ATE against the truth relative to the solution
-    without the false fixes."""
+    without the false fixes; with ``gtsam``, gtsam's GNC on each graph too."""
     table = MarkdownTable(
-        "graph | false fixes | seed | false rejected | true wrongly rejected | loops rejected "
-        "| ATE robust | ATE without them | ratio | time (s)",
+        _header(
+            "graph | false fixes | seed | ATE without them",
+            "false rejected | true wrongly rejected | loops rejected | ATE robust | ratio "
+            "| time (s)",
+            gtsam,
+        ),
         echo=True,
     )
     for name in names:
@@ -124,18 +204,10 @@ def run_fixes(names: list[str], fractions: list[float], seeds: list[int]) -> str
                 fixed, false = add_fixes(measured, truth, 10, information, fraction, seed)
                 clean = without_priors(fixed, false)
                 ate_clean = evaluate(_trajectory(clean, optimize(clean).values), reference)
-                start = time.perf_counter()
-                result = optimize(fixed, robust="gnc", robust_priors=True)
-                elapsed = time.perf_counter() - start
-                rejected = np.zeros(false.size, dtype=bool)
-                rejected[result.summary.rejected_priors] = True
-                ate = evaluate(_trajectory(fixed, result.values), reference).ate.rmse
-                table.add(
-                    f"{name} | {fraction:.0%} | {seed} | {rejected[false].mean():.1%} "
-                    f"| {rejected[~false].mean():.2%} | {len(result.summary.rejected_edges)} "
-                    f"| {ate:.4g} | {ate_clean.ate.rmse:.4g} | {ate / ate_clean.ate.rmse:.3f} "
-                    f"| {elapsed:.1f}"
-                )
+                runs = [solver(fixed, robust_priors=True) for solver in _solvers(gtsam)]
+                cells = [f"{name} | {fraction:.0%} | {seed} | {ate_clean.ate.rmse:.4g}"]
+                cells += [_fix_scores(fixed, false, r, reference, ate_clean.ate.rmse) for r in runs]
+                table.add(" | ".join(cells + _time_ratio(runs)))
     return str(table)
 
 
@@ -147,10 +219,15 @@ def main() -> None:
     parser.add_argument(
         "--fixes", action="store_true", help="false pose fixes (priors) instead of false loops"
     )
+    parser.add_argument(
+        "--gtsam",
+        action="store_true",
+        help="also run gtsam's GNC (TLS) on each graph, side by side",
+    )
     args = parser.parse_args()
     if shared_datasets_dir() is None:
         raise SystemExit("../shared/datasets is not beside this checkout")
-    (run_fixes if args.fixes else run)(args.graphs, args.fractions, args.seeds)
+    (run_fixes if args.fixes else run)(args.graphs, args.fractions, args.seeds, args.gtsam)
 
 
 if __name__ == "__main__":

@@ -8,6 +8,8 @@
 
 from __future__ import annotations
 
+import time
+
 import gtsam
 import numpy as np
 
@@ -179,3 +181,37 @@ def gradient_from_gtsam(graph, factors, gtsam_values) -> np.ndarray:
     for k, node in enumerate(graph.node_ids.tolist()):
         out[k] = tangent_from_gtsam(graph.group, gradient.at(node))
     return out
+
+
+def gnc_tls(
+    graph, values: LieGroup, robust_edges: np.ndarray, robust_priors: bool, quantile: float
+) -> tuple[LieGroup, np.ndarray, np.ndarray, float]:
+    """gtsam's graduated non-convexity with its TLS loss (``GncLMOptimizer``) from ``values``,
+    over the between edges in ``robust_edges`` (and the priors, with ``robust_priors``); every
+    other factor is a known inlier.
+
+    gtsam's threshold is on its factor error ½ rᵀΩr, so ``setInlierCostThresholdsAtProbability
+    (quantile)`` sets ½ χ²_dof(quantile), which is posegraph's c² = χ²_dof(quantile) on rᵀΩr.
+    Returns (solution, rejected edges, rejected priors, seconds of gtsam's GNC without the
+    conversion); a factor is rejected when its final weight is below ½.
+    """
+    factors, initial = graph_to_gtsam(graph, values)
+    edges, priors = graph.num_edges, len(graph.priors)
+    robust = np.zeros(factors.size(), dtype=bool)  # edges, then priors, then gauge priors
+    robust[:edges] = robust_edges
+    robust[edges : edges + priors] = robust_priors
+    params = gtsam.GncLMParams(gtsam.LevenbergMarquardtParams())
+    params.setLossType(gtsam.GncLossType.TLS)
+    params.setKnownInliers(np.flatnonzero(~robust).tolist())
+    start = time.perf_counter()
+    optimizer = gtsam.GncLMOptimizer(factors, initial, params)
+    optimizer.setInlierCostThresholdsAtProbability(quantile)
+    solution = optimizer.optimize()
+    seconds = time.perf_counter() - start
+    rejected = np.flatnonzero(robust & (np.asarray(optimizer.getWeights()) < 0.5))
+    return (
+        values_from_gtsam(graph, solution),
+        rejected[rejected < edges],
+        rejected[rejected >= edges] - edges,
+        seconds,
+    )
