@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import time
+from collections.abc import Callable
 
 import numpy as np
 from posegraph_datasets.generators import resimulate
@@ -107,7 +108,8 @@ def cases(name: str) -> list[tuple[str, PoseGraph, Trajectory | None]]:
     return own + [(label, measured, _trajectory(measured, truth))]
 
 
-def _solvers(gtsam: bool) -> list:
+def _solvers(gtsam: bool) -> list[Callable[..., Run]]:
+    """posegraph's robust mode, then with ``gtsam`` gtsam's GNC."""
     return [posegraph_gnc, gtsam_gnc] if gtsam else [posegraph_gnc]
 
 
