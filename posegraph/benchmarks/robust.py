@@ -37,10 +37,10 @@ from posegraph_datasets.outliers import (
 )
 from posegraph_datasets.paths import gtsam_data_dir, shared_datasets_dir
 
-from ..api import GNC_QUANTILE, optimize
+from ..api import GNC_QUANTILE, optimize, robust_mask
 from ..evaluation import evaluate
 from ..graph import PoseGraph
-from ..initialization import initialize, odometry_mask
+from ..initialization import initialize
 from ..io import read_graph
 from ..lie import LieGroup
 from ..trajectory_io import Trajectory, as_se3
@@ -78,7 +78,8 @@ def gtsam_gnc(graph: PoseGraph, robust_priors: bool = False) -> Run:
     from ..validation.gtsam_bridge import gnc_tls
 
     start = initialize(graph, "odometry")
-    return Run(*gnc_tls(graph, start, ~odometry_mask(graph), robust_priors, GNC_QUANTILE))
+    loops = robust_mask(graph, "loops")
+    return Run(*gnc_tls(graph, start, loops, robust_priors, GNC_QUANTILE))
 
 
 def ground_truth(name: str) -> PoseGraph | None:
