@@ -300,7 +300,7 @@ def bench(args: argparse.Namespace) -> int:
         files = [f for f in files if f.stem in args.graphs]
     if not files:
         raise UsageError("no benchmark graphs found (../shared/datasets or gtsam's Data/)")
-    table = run(files, args.repeats, args.rounds, echo=not (args.quiet or args.json))
+    table = run(files, args.repeats, args.rounds, args.budget, echo=not (args.quiet or args.json))
     if args.json:
         print(json.dumps({"command": "bench", "table": table}, indent=2))
     elif not args.quiet:

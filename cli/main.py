@@ -14,6 +14,7 @@ import traceback
 import warnings
 
 import posegraph
+from posegraph.benchmarks.timing import BUDGET
 from posegraph.evaluation import MAX_KEY_DIFFERENCE
 from posegraph.initialization import INITIALIZERS
 from posegraph.io.tags import EDGE2_ORDERS
@@ -233,6 +234,12 @@ def _parser() -> argparse.ArgumentParser:
         type=_at_least(1),
         default=2,
         help="rounds in which gtsam and posegraph take turns; the best run counts (default 2)",
+    )
+    bench.add_argument(
+        "--budget",
+        type=_at_least(0, float),
+        default=BUDGET,
+        help="seconds of runs at least, per timing and round (default %(default)s)",
     )
     bench.add_argument("--graphs", nargs="*", metavar="NAME", help="default: all found")
     return parser

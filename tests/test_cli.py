@@ -429,6 +429,7 @@ def test_numeric_arguments_are_checked_by_the_parser():
         ),
         (["bench", "--repeats", "0"], "--repeats: must be ≥ 1"),
         (["bench", "--rounds", "0"], "--rounds: must be ≥ 1"),
+        (["bench", "--budget", "-0.5"], "--budget: must be ≥ 0"),
         (["scale-drift", EXAMPLE, "--scale-information", "0"], "must be positive, not 0"),
     ]
     for args, message in cases:

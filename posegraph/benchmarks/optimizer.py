@@ -1,13 +1,14 @@
 """posegraph against gtsam Levenberg-Marquardt on the benchmark graphs, side by side.
 
-Usage: ``python -m posegraph.benchmarks.optimizer [--repeats 3] [--rounds 2] [--graphs …]``.
+Usage: ``python -m posegraph.benchmarks.optimizer [--repeats 3] [--rounds 2] [--budget 0.2]
+[--graphs …]``.
 Both start from the same values (the file's, or odometry where it has no vertices) on the same
 graph; gtsam holds the gauge node with a σ = 1e-6 prior. The three timings of a graph take
-turns, ``repeats`` runs each, for ``rounds`` rounds, so that a slow spell of the machine does not
-fall on one of them alone. Prints a markdown table: time in milliseconds (best of all runs),
-iterations, final error ½ Σ rᵀΩr, the time ratio posegraph/gtsam, and posegraph's time per
-phase; then posegraph with its defaults (``init="auto"``), initialisation included, against the
-same gtsam run from the file's values.
+turns, ``repeats`` runs each and more until ``budget`` seconds have passed, for ``rounds``
+rounds, so that a slow spell of the machine does not fall on one of them alone. Prints a
+markdown table: time in milliseconds (best of all runs), iterations, final error ½ Σ rᵀΩr, the
+time ratio posegraph/gtsam, and posegraph's time per phase; then posegraph with its defaults
+(``init="auto"``), initialisation included, against the same gtsam run from the file's values.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from ..graph import PoseGraph
 from ..io import read_graph
 from ..solvers import Summary
 from .table import MarkdownTable
+from .timing import BUDGET, best_run
 
 
 def benchmark_files() -> list[Path]:
@@ -37,59 +39,57 @@ def benchmark_files() -> list[Path]:
     return [f for f in files if f.is_file()]
 
 
-def time_gtsam(graph: PoseGraph, repeats: int) -> tuple[float, int, float]:
-    """Best of ``repeats`` of gtsam Levenberg-Marquardt (default parameters) from the graph's
-    values: (seconds, iterations, final error ½ Σ rᵀΩr)."""
+def time_gtsam(graph: PoseGraph, repeats: int, budget: float = 0.0) -> tuple[float, int, float]:
+    """Best run of gtsam Levenberg-Marquardt (default parameters) from the graph's values, over
+    at least ``repeats`` runs and ``budget`` seconds (``timing.best_run``): (seconds,
+    iterations, final error ½ Σ rᵀΩr)."""
     import gtsam
 
     from ..validation.gtsam_bridge import graph_to_gtsam
 
     factors, initial = graph_to_gtsam(graph)
-    best, result, iterations = float("inf"), None, 0
-    for _ in range(repeats):
-        start = time.perf_counter()
+
+    def solve(_):
         optimizer = gtsam.LevenbergMarquardtOptimizer(
             factors, initial, gtsam.LevenbergMarquardtParams()
         )
-        result = optimizer.optimize()
-        best = min(best, time.perf_counter() - start)
-        iterations = optimizer.iterations()
-    return best, iterations, factors.error(result)
+        return optimizer.optimize(), optimizer
+
+    best, (result, optimizer) = best_run(solve, repeats, budget)
+    return best, optimizer.iterations(), factors.error(result)
 
 
-def time_posegraph(graph: PoseGraph, repeats: int, init: str) -> tuple[float, Summary]:
-    """Best of ``repeats`` of ``optimize`` with defaults but ``init``: (seconds, summary of that
-    run). ``init`` "file" starts from the graph's values, like gtsam; other initialisations are
-    timed together with the optimisation."""
-    best, result = float("inf"), None
-    for _ in range(repeats):
-        copy = graph.copy()
-        start = time.perf_counter()
-        candidate = optimize(copy, init=init)
-        elapsed = time.perf_counter() - start
-        if elapsed < best:
-            best, result = elapsed, candidate
+def time_posegraph(
+    graph: PoseGraph, repeats: int, init: str, budget: float = 0.0
+) -> tuple[float, Summary]:
+    """Best run of ``optimize`` with defaults but ``init``, over at least ``repeats`` runs and
+    ``budget`` seconds: (seconds, summary of that run). ``init`` "file" starts from the graph's
+    values, like gtsam; other initialisations are timed together with the optimisation. Each
+    run optimises a fresh copy of the graph, made untimed."""
+    best, result = best_run(lambda copy: optimize(copy, init=init), repeats, budget, graph.copy)
     return best, result.summary
 
 
 def side_by_side(
-    graph: PoseGraph, repeats: int, rounds: int
+    graph: PoseGraph, repeats: int, rounds: int, budget: float = 0.0
 ) -> tuple[tuple[float, int, float], tuple[float, Summary], tuple[float, Summary]]:
     """``time_gtsam``, then ``time_posegraph`` from the graph's values and with ``init="auto"``,
     taking turns for ``rounds`` rounds; the best of each: ((seconds, iterations, error),
     (seconds, summary), (seconds, summary))."""
     turns = [
         (
-            time_gtsam(graph, repeats),
-            time_posegraph(graph, repeats, "file"),
-            time_posegraph(graph, repeats, "auto"),
+            time_gtsam(graph, repeats, budget),
+            time_posegraph(graph, repeats, "file", budget),
+            time_posegraph(graph, repeats, "auto", budget),
         )
         for _ in range(rounds)
     ]
     return tuple(min(timings, key=lambda timing: timing[0]) for timings in zip(*turns, strict=True))
 
 
-def run(files: list[Path], repeats: int, rounds: int = 1, echo: bool = False) -> str:
+def run(
+    files: list[Path], repeats: int, rounds: int = 1, budget: float = 0.0, echo: bool = False
+) -> str:
     """Benchmark every file; returns the markdown table, printing it row by row if ``echo``."""
     table = MarkdownTable(
         "graph | read (ms) | gtsam (ms) | gtsam iters | gtsam error | posegraph (ms) | iters "
@@ -103,7 +103,7 @@ def run(files: list[Path], repeats: int, rounds: int = 1, echo: bool = False) ->
         graph = read_graph(str(path)).graph
         read_time = time.perf_counter() - start
         (g_time, g_iters, g_error), (p_time, summary), (d_time, defaults) = side_by_side(
-            graph, repeats, rounds
+            graph, repeats, rounds, budget
         )
         phases = summary.phase_times
         split = " / ".join(
@@ -123,6 +123,12 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--rounds", type=int, default=2)
+    parser.add_argument(
+        "--budget",
+        type=float,
+        default=BUDGET,
+        help="seconds of runs at least, per timing and round (default %(default)s)",
+    )
     parser.add_argument("--graphs", nargs="*", help="names (without suffix) to run; default all")
     args = parser.parse_args()
     files = benchmark_files()
@@ -130,7 +136,7 @@ def main() -> None:
         files = [f for f in files if f.stem in args.graphs]
     if not files:
         raise SystemExit("no benchmark graphs found (../shared/datasets or gtsam's Data/)")
-    run(files, args.repeats, args.rounds, echo=True)
+    run(files, args.repeats, args.rounds, args.budget, echo=True)
 
 
 if __name__ == "__main__":

@@ -1,14 +1,15 @@
 """posegraph against gtsam Levenberg-Marquardt on generated graphs of growing size, side by side.
 
-Usage: ``python -m posegraph.benchmarks.scaling [--repeats 10] [--rounds 2]``.
+Usage: ``python -m posegraph.benchmarks.scaling [--repeats 10] [--rounds 2] [--budget 0.2]``.
 The graphs are spheres (SE3, ``posegraph_datasets.generators.sphere``) and Manhattan worlds
 (SE2, ``manhattan_world``) from 9 to 3000 poses, each starting from its composed noisy
 odometry. This shows from what size posegraph's fixed cost per ``optimize`` call (a few
 milliseconds of numpy calls, whatever the size) stops dominating. Prints a markdown table: gtsam
 from the graph's values, then posegraph from the same values, then posegraph with its defaults
-(``init="auto"``, initialisation included); times in milliseconds (best of ``repeats`` runs in
-each of ``rounds`` rounds, taken in turns: ``optimizer.side_by_side``) and as
-ratios posegraph/gtsam, and the relative difference of the final errors ½ Σ rᵀΩr.
+(``init="auto"``, initialisation included); times in milliseconds (best of ``repeats`` runs,
+and more until ``budget`` seconds have passed, in each of ``rounds`` rounds, taken in turns:
+``optimizer.side_by_side``) and as ratios posegraph/gtsam, and the relative difference of the
+final errors ½ Σ rᵀΩr.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from posegraph_datasets.generators import manhattan_world, sphere
 from ..graph import PoseGraph
 from .optimizer import side_by_side
 from .table import MarkdownTable
+from .timing import BUDGET
 
 SPHERES = ((3, 3), (4, 8), (8, 12), (10, 16), (16, 25), (25, 40))
 """(rings, poses per ring) of the SE3 spheres."""
@@ -36,7 +38,7 @@ def graphs(seed: int = 1) -> Iterator[PoseGraph]:
         yield manhattan_world(poses, grid_size=max(3, round(poses**0.5 / 2)), seed=seed)[0]
 
 
-def run(repeats: int, rounds: int = 1, echo: bool = False) -> str:
+def run(repeats: int, rounds: int = 1, budget: float = 0.0, echo: bool = False) -> str:
     """Benchmark every generated graph; returns the markdown table, printing it row by row if
     ``echo``."""
     table = MarkdownTable(
@@ -45,7 +47,7 @@ def run(repeats: int, rounds: int = 1, echo: bool = False) -> str:
         echo,
     )
     for graph in graphs():
-        gtsam_run, same_run, default_run = side_by_side(graph, repeats, rounds)
+        gtsam_run, same_run, default_run = side_by_side(graph, repeats, rounds, budget)
         gtsam_time, gtsam_iterations, gtsam_error = gtsam_run
         (same_time, same), (default_time, defaults) = same_run, default_run
         difference = (defaults.final_error - gtsam_error) / max(gtsam_error, 1e-300)
@@ -63,8 +65,14 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=10)
     parser.add_argument("--rounds", type=int, default=2)
+    parser.add_argument(
+        "--budget",
+        type=float,
+        default=BUDGET,
+        help="seconds of runs at least, per timing and round (default %(default)s)",
+    )
     args = parser.parse_args()
-    run(args.repeats, args.rounds, echo=True)
+    run(args.repeats, args.rounds, args.budget, echo=True)
 
 
 if __name__ == "__main__":
