@@ -24,7 +24,7 @@ from ..graph import PoseGraph
 from ..io import read_graph
 from ..solvers import Summary
 from .table import MarkdownTable
-from .timing import BUDGET, best_run
+from .timing import add_timing_arguments, best_run
 
 
 def benchmark_files() -> list[Path]:
@@ -121,14 +121,7 @@ def run(
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--rounds", type=int, default=2)
-    parser.add_argument(
-        "--budget",
-        type=float,
-        default=BUDGET,
-        help="seconds of runs at least, per timing and round (default %(default)s)",
-    )
+    add_timing_arguments(parser, repeats=3)
     parser.add_argument("--graphs", nargs="*", help="names (without suffix) to run; default all")
     args = parser.parse_args()
     files = benchmark_files()

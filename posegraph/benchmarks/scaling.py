@@ -22,7 +22,7 @@ from posegraph_datasets.generators import manhattan_world, sphere
 from ..graph import PoseGraph
 from .optimizer import side_by_side
 from .table import MarkdownTable
-from .timing import BUDGET
+from .timing import add_timing_arguments
 
 SPHERES = ((3, 3), (4, 8), (8, 12), (10, 16), (16, 25), (25, 40))
 """(rings, poses per ring) of the SE3 spheres."""
@@ -63,14 +63,7 @@ def run(repeats: int, rounds: int = 1, budget: float = 0.0, echo: bool = False) 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeats", type=int, default=10)
-    parser.add_argument("--rounds", type=int, default=2)
-    parser.add_argument(
-        "--budget",
-        type=float,
-        default=BUDGET,
-        help="seconds of runs at least, per timing and round (default %(default)s)",
-    )
+    add_timing_arguments(parser, repeats=10)
     args = parser.parse_args()
     run(args.repeats, args.rounds, args.budget, echo=True)
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import time
 from collections.abc import Callable
 from typing import Any, TypeVar
@@ -22,10 +23,9 @@ def best_run(
 ) -> tuple[float, Output]:
     """The shortest wall-clock run of ``function`` in seconds, and what that run returned.
 
-    It runs at least ``repeats`` times, and again until ``budget`` seconds have passed, so that
-    a problem of a millisecond gets hundreds of runs: the minimum of few runs that short is
-    mostly the machine's noise. ``setup()`` runs untimed before each run, and its result is
-    ``function``'s argument.
+    It runs at least ``repeats`` times, and again until ``budget`` seconds have passed (see
+    ``BUDGET``). ``setup()`` runs untimed before each run, and its result is ``function``'s
+    argument.
     """
     best, output, runs = float("inf"), None, 0
     deadline = time.perf_counter() + budget
@@ -43,3 +43,16 @@ def best_run(
 def best_time(function: Callable[[], object], repeats: int = 3) -> float:
     """The shortest of ``repeats`` wall-clock runs, in seconds (the least disturbed run)."""
     return best_run(lambda _: function(), repeats)[0]
+
+
+def add_timing_arguments(parser: argparse.ArgumentParser, repeats: int) -> None:
+    """``--repeats`` (default ``repeats``), ``--rounds`` and ``--budget``: the options of a
+    benchmark whose timings take turns (``optimizer.side_by_side``)."""
+    parser.add_argument("--repeats", type=int, default=repeats)
+    parser.add_argument("--rounds", type=int, default=2)
+    parser.add_argument(
+        "--budget",
+        type=float,
+        default=BUDGET,
+        help="seconds of runs at least, per timing and round (default %(default)s)",
+    )
