@@ -8,8 +8,8 @@ import time
 import numpy as np
 
 from .anchoring import priors_as_edges
-from .factors import between_squares, chi2
-from .gnc import gnc_tls
+from .factors import between_squares, chi2, prior_squares
+from .gnc import gnc_tls, tls_objective
 from .graph import PoseGraph, Solution, measured_dof
 from .initialization import (
     align_to_priors,
@@ -100,12 +100,11 @@ def optimize(
     """
     options = options or SolverOptions()
     start = time.perf_counter()
+    kernel, mask = None, None
     if robust is not None:  # checked before any work is done
         kernel = _robust_kernel(robust, graph.group.dof)
         mask = robust_mask(graph, robust_edges)
-    input_error = (
-        0.5 * chi2(graph.values, graph.edges, graph.priors) if graph.initialized.all() else None
-    )
+    input_error = _cost(graph, kernel, mask, robust_priors) if graph.initialized.all() else None
     reused = []
     if init == "auto" and graph.optimized:
         solved = int(graph.initialized.sum())
@@ -120,7 +119,7 @@ def optimize(
         graph.set_values(initialize(graph, init))
     init_time = time.perf_counter() - start
 
-    if robust is None:
+    if kernel is None:
         system, previous = _cached_system(graph, options)
         result = solve(graph, options, callback, system=system, previous=previous)
         graph.last_result = (_structure_key(graph, options), result)
@@ -139,6 +138,34 @@ def optimize(
     return result
 
 
+def _robust_problem(
+    graph: PoseGraph, mask: np.ndarray, robust_priors: bool
+) -> tuple[PoseGraph, np.ndarray]:
+    """(graph, robust class) as the robust solvers see them: with ``robust_priors``, the
+    priors become edges from a held world node (``priors_as_edges``), in the class."""
+    if not (robust_priors and len(graph.priors) > 0):
+        return graph, mask
+    measured = np.concatenate([mask, np.ones(len(graph.priors), dtype=bool)])
+    return priors_as_edges(graph), measured
+
+
+def _cost(
+    graph: PoseGraph, kernel: tuple[str, float] | None, mask: np.ndarray, robust_priors: bool
+) -> float:
+    """The cost ``optimize`` minimises, at the graph's values: ½ Σ rᵀΩr in least squares
+    (``kernel`` None); else ½ Σ ρ(s) over the robust class and ½ Σ s over the rest, with
+    ρ(s) = min(s, c²) for GNC (truncated least squares) or the kernel's ρ."""
+    if kernel is None:
+        return 0.5 * chi2(graph.values, graph.edges, graph.priors)
+    work, measured = _robust_problem(graph, mask, robust_priors)
+    name, width = kernel
+    if name in GNC_NAMES:
+        return 0.5 * tls_objective(work, work.values, measured, width**2)
+    weighting = Robustifier(RobustKernel(name, width), measured)
+    costs, _ = weighting.cost_and_weights(between_squares(work.values, work.edges))
+    return 0.5 * float(costs.sum() + prior_squares(work.values, work.priors).sum())
+
+
 def _robust_solve(
     graph: PoseGraph,
     kernel: tuple[str, float],
@@ -149,16 +176,11 @@ def _robust_solve(
 ) -> tuple[Result, np.ndarray, np.ndarray]:
     """The robust branch of ``optimize``, from the graph's values: (result, edge weights, prior
     weights), the weights those of the solution (0 where rejected). The summary records the
-    kernel and the rejected edges and priors. With ``robust_priors``, the priors are solved
-    for as edges from a held world node (``priors_as_edges``), in the kernel's class."""
-    anchored = robust_priors and len(graph.priors) > 0
-    work, measured = graph, mask
-    if anchored:
-        work = priors_as_edges(graph)
-        measured = np.concatenate([mask, np.ones(len(graph.priors), dtype=bool)])
+    kernel and the rejected edges and priors; its errors are the robust cost (``_cost``)."""
+    work, measured = _robust_problem(graph, mask, robust_priors)
     name, width = kernel
     if name in GNC_NAMES:
-        outcome = gnc_tls(work, measured, width, options)
+        outcome = gnc_tls(work, measured, width, options, callback)
         result, rejected = outcome.result, outcome.rejected
         weights = np.ones(work.num_edges)
         weights[rejected] = 0.0
@@ -168,6 +190,7 @@ def _robust_solve(
         s = between_squares(result.values, work.edges)
         rejected = np.flatnonzero(measured & (s > width**2))
         _, weights = weighting.cost_and_weights(s)
+    anchored = work is not graph
     if anchored:  # the world node is last; the system and linearisation are work's
         result = Result(result.values[: graph.num_nodes], result.summary)
     count = graph.num_edges

@@ -106,9 +106,13 @@ def between_squares(values: LieGroup, edges: EdgeSet) -> np.ndarray:
     return weighted_squares(between_residuals(values, edges), edges.information)
 
 
+def prior_squares(values: LieGroup, priors: EdgeSet) -> np.ndarray:
+    """s = rᵀ Ω r of every prior at ``values``."""
+    if len(priors) == 0:
+        return np.zeros(0)
+    return weighted_squares(prior_residuals(values, priors), priors.information)
+
+
 def chi2(values: LieGroup, edges: EdgeSet, priors: EdgeSet) -> float:
     """Σ rᵀ Ω r over between edges and priors (g2o's χ²); ``error`` is half of it."""
-    total = between_squares(values, edges).sum()
-    if len(priors):
-        total += weighted_squares(prior_residuals(values, priors), priors.information).sum()
-    return float(total)
+    return float(between_squares(values, edges).sum() + prior_squares(values, priors).sum())

@@ -28,18 +28,19 @@ consistency pass and a local search.
 from __future__ import annotations
 
 import dataclasses
+import time
 
 import numpy as np
 
 from .chordal import supports as supports_chordal
-from .factors import between_squares
+from .factors import between_squares, prior_squares
 from .graph import PoseGraph
 from .initialization import initialize
 from .leverage import Leverage, deleted_residuals
 from .lie import LieGroup
 from .linear import NormalEquations
 from .robust import tls_gnc_weights
-from .solvers import Result, SolverOptions
+from .solvers import STOPPED, Callback, IterationRecord, Result, SolverOptions, Summary
 from .solvers import optimize as solve
 
 MU_FACTOR = 1.4
@@ -58,36 +59,92 @@ STAGE_RELATIVE_DECREASE = 1e-5
 @dataclasses.dataclass(frozen=True)
 class GncOutcome:
     result: Result
-    """The final least-squares solve over the kept edges (its summary counts only that solve)."""
+    """The final least-squares solve over the kept edges, with the whole run's summary:
+    every solve's iterations (``IterationRecord.stage`` names the stage) and phase times, and
+    the TLS objective ½ Σ min(s, c²) (½ s outside the mask) as the initial and final error."""
     rejected: np.ndarray
     """Indices of the between edges rejected as outliers."""
     rounds: int
-    iterations: int
-    """Solver iterations over all stages."""
 
 
-def _tls_objective(graph: PoseGraph, values: LieGroup, mask: np.ndarray, width_sq: float) -> float:
-    """Σ min(s, c²) over the edges in ``mask``, plus Σ s over the others, at ``values``."""
+class _Stopped(Exception):
+    """The caller's callback asked to stop; carries the solve that it ended."""
+
+    def __init__(self, result: Result) -> None:
+        super().__init__(STOPPED)
+        self.result = result
+
+
+class _Run:
+    """GNC's solves as one run, as the caller sees it: their iterations numbered in turn, timed
+    from the run's start and labelled by stage, their phase times summed. When the callback
+    asks to stop, the solve under way ends and ``_Stopped`` carries it out."""
+
+    def __init__(self, callback: Callback | None) -> None:
+        self.callback = callback
+        self.start = time.perf_counter()
+        self.history: list[IterationRecord] = []
+        self.phase_times: dict[str, float] = {}
+        self.rounds = 0
+
+    def solve(self, graph: PoseGraph, options: SolverOptions, stage: str, system=None) -> Result:
+        def report(record: IterationRecord) -> bool:
+            record = dataclasses.replace(
+                record,
+                iteration=len(self.history) + 1,
+                elapsed=time.perf_counter() - self.start,
+                stage=stage,
+            )
+            self.history.append(record)
+            return self.callback is not None and bool(self.callback(record))
+
+        result = solve(graph, options, report, system=system)
+        for phase, seconds in result.summary.phase_times.items():
+            self.phase_times[phase] = self.phase_times.get(phase, 0.0) + seconds
+        if result.summary.termination == STOPPED:
+            raise _Stopped(result)
+        return result
+
+    def summary(self, final: Summary, initial_error: float, final_error: float) -> Summary:
+        """``final`` (the last solve's summary) widened to the whole run; "other" is the time
+        outside the solves' linearisation, assembly, factorisation and solving."""
+        total = time.perf_counter() - self.start
+        times = {phase: t for phase, t in self.phase_times.items() if phase != "other"}
+        times["other"] = total - sum(times.values())
+        return dataclasses.replace(
+            final,
+            initial_error=initial_error,
+            final_error=final_error,
+            iterations=self.history,
+            phase_times=times,
+            total_time=total,
+        )
+
+
+def tls_objective(graph: PoseGraph, values: LieGroup, mask: np.ndarray, width_sq: float) -> float:
+    """Σ min(s, c²) over the between edges in ``mask``, plus Σ s over the other edges and the
+    priors, at ``values``: twice the cost that GNC-TLS minimises."""
     s = between_squares(values, graph.edges)
-    return float(np.where(mask, np.minimum(s, width_sq), s).sum())
+    truncated = np.where(mask, np.minimum(s, width_sq), s).sum()
+    return float(truncated + prior_squares(values, graph.priors).sum())
 
 
-def _stages(graph, mask, width_sq, options, start: Result, restart: bool):
-    """GNC rounds from the least-squares solution ``start``; returns (result, weights, rounds,
-    iterations)."""
-    stage = dataclasses.replace(
+def _stages(graph, mask, width_sq, options, start: Result, restart: bool, run: _Run):
+    """GNC rounds from the least-squares solution ``start``; returns (result, weights)."""
+    stage_options = dataclasses.replace(
         options, max_iterations=STAGE_ITERATIONS, relative_decrease=STAGE_RELATIVE_DECREASE
     )
-    result, iterations, rounds = start, 0, 0
+    result, rounds = start, 0
     s = between_squares(result.values, graph.edges)
     weights = np.ones(graph.num_edges)
     largest = s[mask].max(initial=0.0)
     if largest <= width_sq:
-        return result, weights, rounds, iterations
+        return result, weights
     mu = width_sq / (2.0 * largest - width_sq)
     active, system = None, None
     while rounds < MAX_ROUNDS:
         rounds += 1
+        run.rounds += 1
         weights[mask] = tls_gnc_weights(s[mask], width_sq, mu)
         now_active = weights > 0
         work = graph.weighted(weights)
@@ -95,54 +152,73 @@ def _stages(graph, mask, width_sq, options, start: Result, restart: bool):
             active = now_active
             system = NormalEquations(work, work.gauge_nodes(), options.linear_solver)
         work.set_values(initialize(work, "chordal") if restart else result.values)
-        result = solve(work, stage, system=system)
-        iterations += result.summary.num_iterations
+        label = f"gnc round {rounds} ({'chordal' if restart else 'warm'})"
+        result = run.solve(work, stage_options, label, system=system)
         s = between_squares(result.values, graph.edges)
         if rounds > 1 and np.all((weights[mask] < 1e-6) | (weights[mask] > 1.0 - 1e-6)):
             break
         mu *= MU_FACTOR
-    return result, weights, rounds, iterations
+    return result, weights
 
 
 def gnc_tls(
-    graph: PoseGraph, mask: np.ndarray, width: float, options: SolverOptions | None = None
+    graph: PoseGraph,
+    mask: np.ndarray,
+    width: float,
+    options: SolverOptions | None = None,
+    callback: Callback | None = None,
 ) -> GncOutcome:
     """GNC-TLS over the between edges in ``mask`` (the others are trusted), from the graph's
-    values; ``width`` c is the largest inlier residual, in Mahalanobis units."""
+    values; ``width`` c is the largest inlier residual, in Mahalanobis units.
+
+    ``callback`` receives every iteration of every solve (``IterationRecord.stage`` says which);
+    when it returns True, the run stops after that iteration, with the values reached and the
+    edges of the mask with s > c² there rejected (termination ``STOPPED``)."""
     options = options or SolverOptions()
     width_sq = width**2
-    start = solve(graph, dataclasses.replace(options, relative_decrease=STAGE_RELATIVE_DECREASE))
-    iterations, rounds = start.summary.num_iterations, 0
+    run = _Run(callback)
+    initial_error = 0.5 * tls_objective(graph, graph.values, mask, width_sq)
+    try:
+        kept, result = _search(graph, mask, width_sq, options, run)
+    except _Stopped as stopped:
+        result = stopped.result
+        kept = ~mask | (between_squares(result.values, graph.edges) <= width_sq)
+    final_error = 0.5 * tls_objective(graph, result.values, mask, width_sq)
+    summary = run.summary(result.summary, initial_error, final_error)
+    return GncOutcome(
+        dataclasses.replace(result, summary=summary), np.flatnonzero(~kept), run.rounds
+    )
+
+
+def _search(graph, mask, width_sq, options, run: _Run) -> tuple[np.ndarray, Result]:
+    """GNC's steps 1–4 (module docstring); returns (kept edges, the final solve)."""
+    least_squares = dataclasses.replace(options, relative_decrease=STAGE_RELATIVE_DECREASE)
+    start = run.solve(graph, least_squares, "least squares")
     best, best_objective = None, np.inf
     for restart in (False, True) if supports_chordal(graph.group) else (False,):
-        result, weights, stage_rounds, stage_iterations = _stages(
-            graph, mask, width_sq, options, start, restart
-        )
-        rounds, iterations = rounds + stage_rounds, iterations + stage_iterations
-        objective = _tls_objective(graph, result.values, mask, width_sq)
+        result, weights = _stages(graph, mask, width_sq, options, start, restart, run)
+        objective = tls_objective(graph, result.values, mask, width_sq)
         if best is None or objective < best_objective:  # the first, even if not finite
             best, best_objective = (result, weights), objective
     result, weights = best
 
-    kept, result, settle_iterations = _settle(
-        graph, mask, ~mask | (weights > 0.5), result.values, width_sq, options, restart=True
+    kept, result = _settle(
+        graph, mask, ~mask | (weights > 0.5), result.values, width_sq, options, run, restart=True
     )
-    iterations += settle_iterations
-    objective = _tls_objective(graph, result.values, mask, width_sq)
+    objective = tls_objective(graph, result.values, mask, width_sq)
     leverage = _leverage(graph, kept, result, options)
     for _ in range(LOCAL_SEARCH_ROUNDS):
         changed = False
         for step in (_readmit, _drop):
-            trial_kept, trial, trial_objective, trial_iterations = step(
-                graph, mask, kept, result, objective, width_sq, options, leverage
+            trial_kept, trial, trial_objective = step(
+                graph, mask, kept, result, objective, width_sq, options, leverage, run
             )
-            iterations += trial_iterations
             if trial is not None and trial_objective < objective:
                 kept, result, objective, changed = trial_kept, trial, trial_objective, True
                 leverage = _leverage(graph, kept, result, options)
         if not changed:
             break
-    return GncOutcome(result, np.flatnonzero(~kept), rounds, iterations)
+    return kept, result
 
 
 def _leverage(graph, kept, result, options) -> Leverage:
@@ -151,29 +227,28 @@ def _leverage(graph, kept, result, options) -> Leverage:
     return Leverage(graph.with_edges(kept), result.values, linear_solver=options.linear_solver)
 
 
-def _settle(graph, mask, kept, values, width_sq, options, restart: bool):
+def _settle(graph, mask, kept, values, width_sq, options, run: _Run, restart: bool):
     """Least squares over the kept edges, then keep every edge with s ≤ c² at the solution;
-    repeat until the kept set no longer changes. Returns (kept, result, iterations). With
+    repeat until the kept set no longer changes. Returns (kept, result). With
     ``restart`` (SE2, SE3) the first solve starts from the chordal relaxation of the kept edges,
     which escapes a basin that an early, outlier-distorted GNC stage may have led into."""
-    iterations, result = 0, None
+    result = None
     for settle_pass in range(MAX_CONSISTENCY_PASSES):
         work = graph.with_edges(kept)
         if settle_pass == 0 and restart and supports_chordal(graph.group):
             work.set_values(initialize(work, "chordal"))
         else:
             work.set_values(values)
-        result = solve(work, options)
-        iterations += result.summary.num_iterations
+        result = run.solve(work, options, "consistency")
         values = result.values
         consistent = ~mask | (between_squares(values, graph.edges) <= width_sq)
         if np.array_equal(consistent, kept):
             break
         kept = consistent
-    return kept, result, iterations
+    return kept, result
 
 
-def _readmit(graph, mask, kept, result, objective, width_sq, options, leverage):
+def _readmit(graph, mask, kept, result, objective, width_sq, options, leverage, run: _Run):
     """Re-admit the rejected loops that the other re-admitted loops make consistent, and settle.
 
     Candidates are the rejected loops whose innovation χ² against the solution is below c² (from
@@ -186,14 +261,14 @@ def _readmit(graph, mask, kept, result, objective, width_sq, options, leverage):
     repeats over the remaining candidates until all are explained, then the kept set with them
     is settled. The loops of a drifted region pull it back for each other; a lone false loop is
     consistent only with the solution bent to fit it, and without it, its misfit is what it was.
-    Returns (kept, result or None, its TLS objective, iterations)."""
+    Returns (kept, result or None, its TLS objective)."""
     rejected = np.flatnonzero(mask & ~kept)
     if rejected.size == 0:
-        return kept, None, objective, 0
+        return kept, None, objective
     innovation = leverage.innovations(graph.edges.subset(rejected))
     candidates = rejected[innovation < width_sq]
     misfit = between_squares(result.values, graph.edges)
-    values, iterations = result.values, 0
+    values = result.values
     for _ in range(MAX_CONSISTENCY_PASSES):
         if candidates.size == 0:
             break
@@ -201,41 +276,39 @@ def _readmit(graph, mask, kept, result, objective, width_sq, options, leverage):
         with_candidates[candidates] = True
         work = graph.with_edges(with_candidates)
         work.set_values(values)
-        joint = solve(work, options)
-        values, iterations = joint.values, iterations + joint.summary.num_iterations
+        values = run.solve(work, options, "re-admit").values
         position = np.cumsum(with_candidates) - 1  # of each edge in ``work``
         squares = deleted_residuals(
             work, values, edges=position[candidates], linear_solver=options.linear_solver
         ).squares
         explained = (squares <= width_sq) | (squares <= (1.0 - EXPLAINED) * misfit[candidates])
         if explained.all():
-            kept, settled, settle_iterations = _settle(
-                graph, mask, with_candidates, values, width_sq, options, restart=False
+            kept, settled = _settle(
+                graph, mask, with_candidates, values, width_sq, options, run, restart=False
             )
-            settled_objective = _tls_objective(graph, settled.values, mask, width_sq)
-            return kept, settled, settled_objective, iterations + settle_iterations
+            settled_objective = tls_objective(graph, settled.values, mask, width_sq)
+            return kept, settled, settled_objective
         candidates = candidates[explained]
-    return kept, None, objective, iterations
+    return kept, None, objective
 
 
-def _drop(graph, mask, kept, result, objective, width_sq, options, leverage):
+def _drop(graph, mask, kept, result, objective, width_sq, options, leverage, run: _Run):
     """Leave out, one at a time, the kept loops of largest deleted residual d² (from
     ``leverage``, the probe estimates at ``result``), keeping each removal that lowers the TLS
-    ``objective`` of ``result``. Returns (kept, result or None, its TLS objective, iterations)."""
+    ``objective`` of ``result``. Returns (kept, result or None, its TLS objective)."""
     scores = np.zeros(graph.num_edges)
     scores[kept] = leverage.deleted_residuals().innovation
     # Dropping a loop lowers the objective when d² > c²; below c²/2 the estimate's error
     # (≈ 30%) cannot hide such a loop.
     candidates = np.flatnonzero(mask & kept & (scores > 0.5 * width_sq))
-    best, iterations = None, 0
+    best = None
     for edge in candidates[np.argsort(-scores[candidates])][:LOCAL_SEARCH_CANDIDATES]:
         without = kept.copy()
         without[edge] = False
         work = graph.with_edges(without)
         work.set_values(result.values)
-        trial = solve(work, options)
-        iterations += trial.summary.num_iterations
-        trial_objective = _tls_objective(graph, trial.values, mask, width_sq)
+        trial = run.solve(work, options, "drop")
+        trial_objective = tls_objective(graph, trial.values, mask, width_sq)
         if trial_objective < objective:
             kept, result, objective, best = without, trial, trial_objective, trial
-    return kept, best, objective, iterations
+    return kept, best, objective

@@ -243,8 +243,9 @@ def test_gnc_local_search_drops_a_false_loop_the_solution_bent_to_fit(shared_dat
         with_search.result.values.translation - clean.values.translation, axis=1
     )
     assert distance.max() < 0.01
+    # The TLS cost: each rejected loop adds c²/2 to the outlier-free optimum.
     assert with_search.result.summary.final_error == pytest.approx(
-        clean.summary.final_error, rel=1e-6
+        clean.summary.final_error + 0.5 * width**2 * false.sum(), rel=1e-6
     )
     monkeypatch.setattr(gnc, "LOCAL_SEARCH_CANDIDATES", 0)
     without_search = gnc_tls(corrupted, mask, width)
@@ -308,7 +309,7 @@ def test_gnc_readmits_the_true_loops_of_a_drifted_region(shared_dataset, monkeyp
     monkeypatch.setattr(
         gnc,
         "_readmit",
-        lambda graph, mask, kept, result, objective, *rest: (kept, None, objective, 0),
+        lambda graph, mask, kept, result, objective, *rest: (kept, None, objective),
     )
     without = posegraph.optimize(corrupted.copy(), robust="gnc")
     assert rejection_rates(corrupted, false, without.summary.rejected_edges)[1] > 0.02
@@ -413,6 +414,81 @@ def test_irls_kernels_weigh_priors_with_robust_priors():
     weights = graph.solution.prior_weights
     assert weights[false].max() < 0.5 < 0.8 < weights[~false].min()
     assert set(np.flatnonzero(false)) <= set(result.summary.rejected_priors)
+
+
+def _robust_cost(graph, values, kernel, loops, robust_priors):
+    """½ Σ ρ(s) over the loops (and the priors, with ``robust_priors``), ½ Σ s over the rest;
+    ρ(s) = min(s, c²) for "gnc", else the kernel's."""
+    if kernel == "gnc":
+        width_sq = default_width(graph.group.dof, 0.999) ** 2
+        rho = lambda s: np.minimum(s, width_sq)  # noqa: E731
+    else:
+        rho = RobustKernel(kernel, default_width(graph.group.dof, KERNEL_QUANTILE)).cost
+    edges = between_squares(values, graph.edges)
+    priors = weighted_squares(prior_residuals(values, graph.priors), graph.priors.information)
+    edge_costs = np.where(loops, rho(edges), edges)
+    return 0.5 * (edge_costs.sum() + (rho(priors) if robust_priors else priors).sum())
+
+
+@pytest.mark.parametrize("robust_priors", [False, True], ids=["trusted fixes", "robust fixes"])
+@pytest.mark.parametrize("kernel", ["gnc", "cauchy"])
+def test_a_robust_run_reports_its_robust_cost_from_input_to_solution(kernel, robust_priors):
+    """The errors of a robust run (input values, initial values, solution) are all the robust
+    cost, the one minimised; a GNC run's stop at the outlier-free solution counts c²/2 for each
+    rejected loop. Before, the input error was least squares', and GNC's initial and final
+    errors were those of its last solve, over the kept edges only."""
+    graph, _ = city_with_fixes(0.3, seed=2)
+    corrupted, _ = add_false_loops(graph, 0.1, seed=4)
+    loops = robust_mask(corrupted, "loops")
+    given = corrupted.values
+    start = initialize(corrupted, "odometry")
+    result = posegraph.optimize(corrupted, robust=kernel, robust_priors=robust_priors)
+    summary = result.summary
+    for error, values in (
+        (summary.input_error, given),
+        (summary.initial_error, start),
+        (summary.final_error, result.values),
+    ):
+        assert error == pytest.approx(
+            _robust_cost(corrupted, values, kernel, loops, robust_priors), rel=1e-9
+        )
+
+
+def test_a_gnc_run_reports_every_solve_and_stops_when_asked():
+    """GNC's summary covers the whole run: every solve's iterations, numbered in turn and
+    labelled by stage, and phase times that account for the run. A callback that returns True
+    ends the run at once, with the values reached and the loops that misfit there rejected."""
+    graph, _ = manhattan_world(num_poses=300, seed=67)
+    corrupted, _ = add_false_loops(graph, 0.3, seed=2)
+    result = posegraph.optimize(corrupted.copy(), robust="gnc")
+    summary = result.summary
+    history = summary.iterations
+    assert [r.iteration for r in history] == list(range(1, summary.num_iterations + 1))
+    assert np.all(np.diff([r.elapsed for r in history]) >= 0)
+    stages = [r.stage for r in history]
+    assert stages[0] == "least squares"
+    assert {"gnc round 1 (warm)", "gnc round 1 (chordal)", "consistency"} <= set(stages)
+    phases = sum(summary.phase_times.values())
+    assert min(summary.phase_times.values()) >= 0
+    assert 0.9 * (summary.total_time - summary.initialization_time) <= phases
+    assert phases <= summary.total_time
+
+    seen = []
+
+    def stop_in_the_second_round(record):
+        seen.append(record)
+        return record.stage == "gnc round 2 (warm)"
+
+    stopped = posegraph.optimize(corrupted.copy(), robust="gnc", callback=stop_in_the_second_round)
+    assert stopped.summary.termination == posegraph.solvers.STOPPED
+    assert not stopped.summary.converged
+    assert stopped.summary.iterations == seen
+    assert seen[-1].stage == "gnc round 2 (warm)"
+    assert all(record.stage != "gnc round 2 (warm)" for record in seen[:-1])
+    s = between_squares(stopped.values, corrupted.edges)
+    width_sq = default_width(3, 0.999) ** 2
+    loops = robust_mask(corrupted, "loops")
+    assert stopped.summary.rejected_edges == np.flatnonzero(loops & (s > width_sq)).tolist()
 
 
 def test_marginals_after_robust_priors_leave_the_rejected_fixes_out():

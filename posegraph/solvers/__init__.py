@@ -1,7 +1,15 @@
 """Nonlinear least-squares solvers: Gauss-Newton and Levenberg-Marquardt."""
 
-from .optimize import Callback, optimize
+from .optimize import STOPPED, Callback, optimize
 from .options import SolverOptions
 from .summary import IterationRecord, Result, Summary
 
-__all__ = ["Callback", "IterationRecord", "Result", "SolverOptions", "Summary", "optimize"]
+__all__ = [
+    "STOPPED",
+    "Callback",
+    "IterationRecord",
+    "Result",
+    "SolverOptions",
+    "Summary",
+    "optimize",
+]

@@ -35,7 +35,8 @@ from .options import SolverOptions
 from .summary import IterationRecord, Result, Summary
 
 Callback = Callable[[IterationRecord], bool | None]
-"""Called after every iteration; returning True stops the run ("stopped by callback")."""
+"""Called after every iteration; returning True stops the run (termination ``STOPPED``)."""
+STOPPED = "stopped by callback"
 
 _PHASES = ("linearize", "assemble", "factorize", "solve", "other")
 
@@ -267,7 +268,7 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
         )
         history.append(record)
         if callback is not None and callback(record):
-            termination = "stopped by callback"
+            termination = STOPPED
             break
         if not accepted:
             if not lm:

@@ -19,6 +19,8 @@ class IterationRecord:
     accepted: bool
     elapsed: float
     """Seconds since the start of ``optimize``."""
+    stage: str = ""
+    """The part of a robust run the iteration belongs to ("gnc round 3 (warm)"), else ""."""
 
 
 @dataclasses.dataclass
