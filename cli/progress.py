@@ -18,10 +18,6 @@ class Progress:
 
     def __enter__(self) -> Progress:
         self._previous_handler = signal.signal(signal.SIGINT, self._on_interrupt)
-        if self.enabled:
-            print(
-                f"{'iter':>5} {'error':>16} {'lambda':>9} {'step':>9} {'time':>8}", file=sys.stderr
-            )
         return self
 
     def __exit__(self, *exc) -> None:
@@ -33,12 +29,18 @@ class Progress:
             print("interrupted: stopping after this iteration …", file=sys.stderr)
 
     def __call__(self, record: IterationRecord) -> bool:
-        """The solver callback: print, and stop the run once Ctrl-C was pressed."""
+        """The solver callback: print, and stop the run once Ctrl-C was pressed. The header
+        comes with the first iteration, with a stage column when the run has stages (GNC)."""
         if self.enabled:
+            if record.iteration == 1:
+                stage = "  stage" if record.stage else ""
+                header = f"{'iter':>5} {'error':>16} {'lambda':>9} {'step':>9} {'time':>8}{stage}"
+                print(header, file=sys.stderr)
+            stage = f"  {record.stage}" if record.stage else ""
             mark = "" if record.accepted else "  (rejected)"
             print(
                 f"{record.iteration:>5} {record.error:>16.10g} {record.damping:>9.2e} "
-                f"{record.step_norm:>9.2e} {record.elapsed:>7.2f}s{mark}",
+                f"{record.step_norm:>9.2e} {record.elapsed:>7.2f}s{stage}{mark}",
                 file=sys.stderr,
                 flush=True,
             )

@@ -73,6 +73,7 @@ SUMMARY = {
                     "step_norm": _NUMBER,
                     "accepted": {"type": "boolean"},
                     "elapsed": _NUMBER,
+                    "stage": {"type": "string"},
                 },
             },
         },

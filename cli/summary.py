@@ -23,25 +23,50 @@ def format_summary(
         + ", ".join(f"{name} {seconds:.3f}" for name, seconds in phases.items()),
     ]
     if summary.robust:
-        rejected = f"{len(summary.rejected_edges)} edge(s)"
-        if summary.rejected_priors:
-            rejected += f" and {len(summary.rejected_priors)} prior(s)"
-        lines.append(f"  robust          {summary.robust}: {rejected} rejected")
+        lines.append(f"  robust          {summary.robust}: {_rejected(graph, summary)}")
     lines.extend(f"  {what:<15} {path}" for what, path in written.items() if path)
     return "\n".join(lines)
 
 
+SHOWN_REJECTED = 5
+"""Rejected edges and priors named in the report; ``--json`` lists them all."""
+
+
+def _rejected(graph: PoseGraph, summary: Summary) -> str:
+    """What a robust run rejected: the edges by their nodes' ids (i→j), the priors by their
+    node's id, the first ``SHOWN_REJECTED`` of each."""
+    ids = graph.node_ids
+    edges = [f"{ids[graph.edges.i[k]]}→{ids[graph.edges.j[k]]}" for k in summary.rejected_edges]
+    priors = [f"on {ids[graph.priors.i[k]]}" for k in summary.rejected_priors]
+    parts = [f"{len(edges)} edge(s) rejected{_listed(edges)}"]
+    if priors:
+        parts.append(f"{len(priors)} prior(s) rejected{_listed(priors)}")
+    more = max(len(edges), len(priors)) > SHOWN_REJECTED
+    return "; ".join(parts) + (" (--json lists all)" if more else "")
+
+
+def _listed(names: list[str]) -> str:
+    """ ": a, b, c" of at most ``SHOWN_REJECTED`` names, "…" for the rest; "" if none."""
+    if not names:
+        return ""
+    return ": " + ", ".join(names[:SHOWN_REJECTED]) + (", …" if len(names) > SHOWN_REJECTED else "")
+
+
 def _error_lines(summary: Summary) -> list[str]:
-    """Error and χ² from the input values, through the initialisation, to the optimum."""
+    """Error and χ² from the input values, through the initialisation, to the optimum; of a
+    robust run, its robust cost (ρ the kernel, s = rᵀΩr)."""
     steps = [(summary.initial_error, None)]
     if summary.input_error is not None and summary.input_error != summary.initial_error:
         steps = [(summary.input_error, "input"), (summary.initial_error, summary.initialization)]
+    names = (
+        ("error ½Σρ(s)", "chi2  Σρ(s)") if summary.robust else ("error ½Σrᵀ Ω r", "chi2  Σrᵀ Ω r")
+    )
     lines = []
-    for name, factor in (("error ½Σrᵀ Ω r", 1.0), ("chi2  Σrᵀ Ω r ", 2.0)):
+    for name, factor in zip(names, (1.0, 2.0), strict=True):
         path = " -> ".join(
             f"{factor * value:.10g}" + (f" ({label})" if label else "") for value, label in steps
         )
-        lines.append(f"  {name}  {path} -> {factor * summary.final_error:.10g}")
+        lines.append(f"  {name:<15} {path} -> {factor * summary.final_error:.10g}")
     return lines
 
 

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from posegraph_cli.schema import SCHEMAS
 from posegraph_datasets import example
+from posegraph_datasets.outliers import add_false_loops
 from posegraph_datasets.paths import BENCHMARK_GRAPHS
 
 from posegraph.io import read_graph, write_graph
@@ -137,11 +138,16 @@ def test_covariances_that_do_not_exist_are_refused_and_nothing_is_written(tmp_pa
     run("optimize", graph_file, "--covariances", graph_file, check_exit=2)  # never the input
 
 
-def test_progress_is_shown_on_a_terminal(tmp_path):
-    """Under a pseudo-terminal, optimize prints an iteration table while it runs."""
+@pytest.mark.parametrize("robust", [[], ["--robust", "gnc"]], ids=["least squares", "gnc"])
+def test_progress_is_shown_on_a_terminal(tmp_path, robust):
+    """Under a pseudo-terminal, optimize prints an iteration table while it runs; a GNC run's
+    table names the stage of each iteration."""
     main, secondary = pty.openpty()
     process = subprocess.Popen(
-        [*COMMAND, "optimize", EXAMPLE], stdin=secondary, stdout=secondary, stderr=secondary
+        [*COMMAND, "optimize", EXAMPLE, *robust],
+        stdin=secondary,
+        stdout=secondary,
+        stderr=secondary,
     )
     os.close(secondary)
     output = b""
@@ -158,6 +164,8 @@ def test_progress_is_shown_on_a_terminal(tmp_path):
     text = output.decode()
     assert "iter" in text and "lambda" in text
     assert "    1 " in text  # the first iteration's line
+    assert ("stage" in text) == bool(robust)
+    assert ("s  least squares" in text) == bool(robust)  # after the time column
 
 
 def test_optimize_refuses_to_overwrite_its_input(tmp_path):
@@ -235,7 +243,23 @@ def test_robust_priors_reject_false_fixes_read_from_a_file(tmp_path):
     loops_only = run_json("optimize", path, "--robust", "gnc")["summary"]
     assert loops_only["rejected_priors"] == []
     text = run("optimize", path, "--robust", "gnc", "--robust-priors").stdout
-    assert f"0 edge(s) and {false.sum()} prior(s) rejected" in text
+    first = ", ".join(f"on {graph.node_ids[graph.priors.i[k]]}" for k in np.flatnonzero(false)[:5])
+    assert f"0 edge(s) rejected; {false.sum()} prior(s) rejected: {first}, …" in text
+
+
+def test_robust_report_names_the_rejected_loops_by_their_nodes(tmp_path):
+    """The text report names the first rejected loops as i→j by node id, the same edges as
+    the JSON's rejected_edges, and points to --json for the rest."""
+    graph, _ = city_with_fixes(0.0, seed=0)
+    corrupted, false = add_false_loops(graph, 0.1, seed=0)
+    path = tmp_path / "false_loops.g2o"
+    write_graph(corrupted, str(path))
+    rejected = run_json("optimize", path, "--robust", "gnc")["summary"]["rejected_edges"]
+    assert rejected == np.flatnonzero(false).tolist()
+    ids, edges = corrupted.node_ids, corrupted.edges
+    first = ", ".join(f"{ids[edges.i[k]]}→{ids[edges.j[k]]}" for k in rejected[:5])
+    text = run("optimize", path, "--robust", "gnc").stdout
+    assert f"{len(rejected)} edge(s) rejected: {first}, … (--json lists all)" in text
 
 
 def test_a_closed_output_pipe_ends_quietly():
