@@ -40,7 +40,15 @@ from .leverage import Leverage, deleted_residuals
 from .lie import LieGroup
 from .linear import NormalEquations
 from .robust import tls_gnc_weights
-from .solvers import STOPPED, Callback, IterationRecord, Result, SolverOptions, Summary
+from .solvers import (
+    STOPPED,
+    TIME_LIMIT,
+    Callback,
+    IterationRecord,
+    Result,
+    SolverOptions,
+    Summary,
+)
 from .solvers import optimize as solve
 
 MU_FACTOR = 1.4
@@ -61,24 +69,27 @@ class GncOutcome:
     result: Result
     """The final least-squares solve over the kept edges, with the whole run's summary:
     every solve's iterations (``IterationRecord.stage`` names the stage) and phase times, and
-    the TLS objective ½ Σ min(s, c²) (½ s outside the mask) as the initial and final error."""
+    the TLS cost ½ Σ min(s, c²) (½ s outside the mask, and for priors) as the initial and final
+    error."""
     rejected: np.ndarray
     """Indices of the between edges rejected as outliers."""
     rounds: int
 
 
 class _Stopped(Exception):
-    """The caller's callback asked to stop; carries the solve that it ended."""
+    """The caller's callback asked to stop, or the run's time limit passed; carries the solve
+    that this ended."""
 
     def __init__(self, result: Result) -> None:
-        super().__init__(STOPPED)
+        super().__init__(result.summary.termination)
         self.result = result
 
 
 class _Run:
     """GNC's solves as one run, as the caller sees it: their iterations numbered in turn, timed
-    from the run's start and labelled by stage, their phase times summed. When the callback
-    asks to stop, the solve under way ends and ``_Stopped`` carries it out."""
+    from the run's start and labelled by stage, their phase times summed. The options' time
+    limit is the run's. When the callback asks to stop or the time is up, the solve under way
+    ends and ``_Stopped`` carries it out."""
 
     def __init__(self, callback: Callback | None) -> None:
         self.callback = callback
@@ -98,10 +109,13 @@ class _Run:
             self.history.append(record)
             return self.callback is not None and bool(self.callback(record))
 
+        if options.time_limit is not None:
+            left = max(options.time_limit - (time.perf_counter() - self.start), 0.0)
+            options = dataclasses.replace(options, time_limit=left)
         result = solve(graph, options, report, system=system)
         for phase, seconds in result.summary.phase_times.items():
             self.phase_times[phase] = self.phase_times.get(phase, 0.0) + seconds
-        if result.summary.termination == STOPPED:
+        if result.summary.termination in (STOPPED, TIME_LIMIT):
             raise _Stopped(result)
         return result
 
@@ -171,9 +185,10 @@ def gnc_tls(
     """GNC-TLS over the between edges in ``mask`` (the others are trusted), from the graph's
     values; ``width`` c is the largest inlier residual, in Mahalanobis units.
 
-    ``callback`` receives every iteration of every solve (``IterationRecord.stage`` says which);
-    when it returns True, the run stops after that iteration, with the values reached and the
-    edges of the mask with s > c² there rejected (termination ``STOPPED``)."""
+    ``callback`` receives every iteration of every solve (``IterationRecord.stage`` says which).
+    When it returns True, or when ``options.time_limit`` has passed since the run began, the
+    run stops after that iteration, with the values reached and the edges of the mask with
+    s > c² there rejected (termination ``STOPPED`` or ``TIME_LIMIT``)."""
     options = options or SolverOptions()
     width_sq = width**2
     run = _Run(callback)

@@ -491,6 +491,19 @@ def test_a_gnc_run_reports_every_solve_and_stops_when_asked():
     assert stopped.summary.rejected_edges == np.flatnonzero(loops & (s > width_sq)).tolist()
 
 
+def test_a_time_limit_bounds_the_whole_gnc_run():
+    """``time_limit`` is the run's, not each solve's: a twentieth of the run's own time ends it
+    early, with the termination saying so."""
+    graph, _ = manhattan_world(num_poses=300, seed=67)
+    corrupted, _ = add_false_loops(graph, 0.3, seed=2)
+    full = posegraph.optimize(corrupted.copy(), robust="gnc").summary
+    options = posegraph.SolverOptions(time_limit=full.total_time / 20)
+    limited = posegraph.optimize(corrupted.copy(), robust="gnc", options=options).summary
+    assert full.converged
+    assert limited.termination == posegraph.solvers.TIME_LIMIT and not limited.converged
+    assert limited.total_time < full.total_time / 2
+
+
 def test_marginals_after_robust_priors_leave_the_rejected_fixes_out():
     graph, false = city_with_fixes(0.3, seed=0)
     posegraph.optimize(graph, robust="gnc", robust_priors=True)

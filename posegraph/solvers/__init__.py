@@ -1,6 +1,6 @@
 """Nonlinear least-squares solvers: Gauss-Newton and Levenberg-Marquardt."""
 
-from .optimize import STOPPED, Callback, optimize
+from .optimize import STOPPED, TIME_LIMIT, Callback, optimize
 from .options import SolverOptions
 from .summary import IterationRecord, Result, Summary
 
@@ -10,6 +10,7 @@ __all__ = [
     "IterationRecord",
     "Result",
     "SolverOptions",
+    "TIME_LIMIT",
     "Summary",
     "optimize",
 ]

@@ -37,6 +37,7 @@ from .summary import IterationRecord, Result, Summary
 Callback = Callable[[IterationRecord], bool | None]
 """Called after every iteration; returning True stops the run (termination ``STOPPED``)."""
 STOPPED = "stopped by callback"
+TIME_LIMIT = "time limit reached"
 
 _PHASES = ("linearize", "assemble", "factorize", "solve", "other")
 
@@ -216,7 +217,7 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
             termination, converged = "gradient below tolerance", True
             break
         if options.time_limit is not None and clock.elapsed() > options.time_limit:
-            termination = "time limit reached"
+            termination = TIME_LIMIT
             break
         if options.damping == "diagonal":
             scale = np.clip(diagonal, options.min_diagonal, options.max_diagonal)
