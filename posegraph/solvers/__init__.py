@@ -6,11 +6,11 @@ from .summary import IterationRecord, Result, Summary
 
 __all__ = [
     "STOPPED",
+    "TIME_LIMIT",
     "Callback",
     "IterationRecord",
     "Result",
     "SolverOptions",
-    "TIME_LIMIT",
     "Summary",
     "optimize",
 ]
