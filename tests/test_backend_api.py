@@ -13,9 +13,10 @@ from posegraph_datasets.outliers import add_false_loops
 import posegraph
 from posegraph import sparse_cholesky
 from posegraph.api import RESTART
-from posegraph.benchmarks.incremental import stream
+from posegraph.benchmarks.incremental import run, stream
 from posegraph.factors import between_squares, linearize_between, linearize_priors
 from posegraph.graph import PoseGraph
+from posegraph.io import write_graph
 from posegraph.lie import SE2, SE3, Sim3
 from posegraph.linear import NormalEquations
 from posegraph.sparse_cholesky import COUPLED_COLUMNS, SOLVED_COLUMNS
@@ -285,6 +286,20 @@ def test_warm_starts_reuse_the_solution_and_then_the_structure():
     assert np.mean([s.num_iterations for s in summaries[1:]]) < np.mean(
         [summaries[0].num_iterations, 4]
     )
+
+
+def test_streaming_with_false_loops_rejects_them_as_a_batch_call_does(tmp_path):
+    """The incremental benchmark's robust mode (``--robust gnc --false-loops``): every call of
+    the stream, warm-started, runs GNC, and the last one rejects exactly the false loops, which
+    the benchmark finds among the streamed edges (they arrive in another order than the file's),
+    as a call from scratch on the whole graph does."""
+    graph, _ = manhattan_world(num_poses=150, seed=93)
+    path = tmp_path / "manhattan.g2o"
+    write_graph(graph, str(path))
+    report = run(path, 50, robust="gnc", false_loops=0.1, seed=1)
+    exactly_the_false_loops = "100.0% of the false loops and 0.00% of the true ones"
+    assert f"reject {exactly_the_false_loops} (warm), {exactly_the_false_loops} (scratch)" in report
+    assert "(3 optimisations)" in report
 
 
 def test_a_warm_start_restarts_when_new_loops_disagree_with_the_solution():
