@@ -14,7 +14,7 @@ import traceback
 import warnings
 
 import posegraph
-from posegraph.benchmarks.timing import BUDGET
+from posegraph.benchmarks.timing import add_timing_arguments, at_least
 from posegraph.evaluation import MAX_KEY_DIFFERENCE
 from posegraph.initialization import INITIALIZERS
 from posegraph.io.tags import EDGE2_ORDERS
@@ -50,23 +50,6 @@ EXAMPLES = {
     "bench": """examples:
   posegraph bench --graphs sphere2500 parking-garage --repeats 3""",
 }
-
-
-def _at_least(minimum: float, kind: type = int):
-    """An argparse type: a number of ``kind`` no smaller than ``minimum``."""
-
-    def parse(text: str):
-        try:
-            value = kind(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(
-                f"not {'an integer' if kind is int else 'a number'}: {text!r}"
-            ) from None
-        if not value >= minimum:
-            raise argparse.ArgumentTypeError(f"must be ≥ {minimum}, not {text}")
-        return value
-
-    return parse
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -150,8 +133,8 @@ def _parser() -> argparse.ArgumentParser:
         help="write every pose's marginal covariance at the optimum here (text: id, then the "
         "upper triangle over the tangent; README)",
     )
-    opt.add_argument("--max-iterations", type=_at_least(0), default=100, help="default: 100")
-    opt.add_argument("--time-limit", type=_at_least(0, float), help="seconds")
+    opt.add_argument("--max-iterations", type=at_least(0), default=100, help="default: 100")
+    opt.add_argument("--time-limit", type=at_least(0, float), help="seconds")
     opt.add_argument(
         "--fix", type=int, nargs="+", metavar="ID", default=[], help="hold these nodes"
     )
@@ -186,10 +169,10 @@ def _parser() -> argparse.ArgumentParser:
     ev.add_argument("estimate", help="g2o, TORO, TUM or KITTI")
     ev.add_argument("ground_truth", help="g2o, TORO, TUM or KITTI")
     ev.add_argument("--align", choices=["se3", "sim3", "none"], default="se3", help="default: se3")
-    ev.add_argument("--delta", type=_at_least(1), default=1, help="RPE step in poses (default 1)")
+    ev.add_argument("--delta", type=at_least(1), default=1, help="RPE step in poses (default 1)")
     ev.add_argument(
         "--max-time-difference",
-        type=_at_least(0, float),
+        type=at_least(0, float),
         default=MAX_KEY_DIFFERENCE,
         metavar="SECONDS",
         help=f"pair poses whose time stamps differ by at most this (default {MAX_KEY_DIFFERENCE}, "
@@ -228,19 +211,7 @@ def _parser() -> argparse.ArgumentParser:
     drift.add_argument("--overwrite", action="store_true", help="allow -o to be the input file")
 
     bench = command("bench", "time posegraph against gtsam on the benchmark graphs", [common])
-    bench.add_argument("--repeats", type=_at_least(1), default=3, help="runs per round (default 3)")
-    bench.add_argument(
-        "--rounds",
-        type=_at_least(1),
-        default=2,
-        help="rounds in which gtsam and posegraph take turns; the best run counts (default 2)",
-    )
-    bench.add_argument(
-        "--budget",
-        type=_at_least(0, float),
-        default=BUDGET,
-        help="seconds of runs at least, per timing and round (default %(default)s)",
-    )
+    add_timing_arguments(bench, repeats=3)
     bench.add_argument("--graphs", nargs="*", metavar="NAME", help="default: all found")
     return parser
 

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import argparse
 import itertools
 import time
 
-from posegraph.benchmarks.timing import best_run
+import pytest
+
+from posegraph.benchmarks.timing import add_timing_arguments, best_run
 
 SETUP = 0.05
 """Seconds each setup sleeps: a timed setup would make every run last at least this long."""
@@ -44,3 +47,19 @@ def test_best_run_runs_at_least_repeats_times_and_until_the_budget_is_spent():
     best_run(function, repeats=2, budget=0.3, setup=setup)
     assert time.perf_counter() - start >= 0.3
     assert next(calls) >= 4
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--repeats", "0"], "--repeats: must be ≥ 1"),
+        (["--budget", "-0.5"], "--budget: must be ≥ 0"),
+    ],
+)
+def test_the_benchmark_scripts_refuse_what_posegraph_bench_refuses(argv, message, capsys):
+    parser = argparse.ArgumentParser()
+    add_timing_arguments(parser, repeats=3)
+    assert parser.parse_args([]).repeats == 3
+    with pytest.raises(SystemExit):
+        parser.parse_args(argv)
+    assert message in capsys.readouterr().err

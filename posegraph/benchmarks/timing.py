@@ -1,4 +1,5 @@
-"""Best-of-n wall-clock timing shared by the benchmark scripts."""
+"""Best-of-n wall-clock timing, and the timing options shared by the benchmark scripts and
+``posegraph bench``."""
 
 from __future__ import annotations
 
@@ -45,14 +46,42 @@ def best_time(function: Callable[[], object], repeats: int = 3) -> float:
     return best_run(lambda _: function(), repeats)[0]
 
 
+def at_least(minimum: float, kind: type = int) -> Callable[[str], Any]:
+    """An argparse type: a number of ``kind`` no smaller than ``minimum``."""
+
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"not {'an integer' if kind is int else 'a number'}: {text!r}"
+            ) from None
+        if not value >= minimum:
+            raise argparse.ArgumentTypeError(f"must be ≥ {minimum}, not {text}")
+        return value
+
+    return parse
+
+
 def add_timing_arguments(parser: argparse.ArgumentParser, repeats: int) -> None:
     """``--repeats`` (default ``repeats``), ``--rounds`` and ``--budget``: the options of a
-    benchmark whose timings take turns (``optimizer.side_by_side``)."""
-    parser.add_argument("--repeats", type=int, default=repeats)
-    parser.add_argument("--rounds", type=int, default=2)
+    benchmark whose timings take turns (``optimizer.side_by_side``), for the benchmark
+    scripts and ``posegraph bench``."""
+    parser.add_argument(
+        "--repeats",
+        type=at_least(1),
+        default=repeats,
+        help="runs per round at least (default %(default)s)",
+    )
+    parser.add_argument(
+        "--rounds",
+        type=at_least(1),
+        default=2,
+        help="rounds in which gtsam and posegraph take turns; the best run counts (default %(default)s)",
+    )
     parser.add_argument(
         "--budget",
-        type=float,
+        type=at_least(0, float),
         default=BUDGET,
         help="seconds of runs at least, per timing and round (default %(default)s)",
     )
