@@ -24,6 +24,7 @@ from ..api import RESTART, optimize
 from ..graph import PoseGraph
 from ..io import read_graph
 from ..solvers import Summary
+from .timing import at_least
 
 
 def arrivals(full: PoseGraph, step: int) -> tuple[np.ndarray, np.ndarray]:
@@ -112,7 +113,7 @@ def _rates(graph: PoseGraph, false: np.ndarray, summary: Summary) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--step", type=int, default=100)
+    parser.add_argument("--step", type=at_least(1), default=100)
     parser.add_argument("--graph", help="a graph file (default: gtsam's Data/w10000.graph)")
     parser.add_argument("--robust", help="a robust spec for every call, as optimize's (gnc, …)")
     parser.add_argument(

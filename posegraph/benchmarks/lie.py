@@ -12,7 +12,7 @@ import numpy as np
 
 from ..lie import SE3, Sim3
 from .table import MarkdownTable
-from .timing import best_time
+from .timing import at_least, best_time
 
 
 def _peers(count: int, rng: np.random.Generator):
@@ -85,7 +85,7 @@ def run(count: int) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--count", type=int, default=100_000)
+    parser.add_argument("--count", type=at_least(1), default=100_000)
     print(run(parser.parse_args().count))
 
 

@@ -20,7 +20,7 @@ from ..api import optimize
 from ..graph import PoseGraph
 from ..io import read_graph
 from ..marginals import marginals
-from .timing import best_time
+from .timing import at_least, best_time
 
 
 def default_graph() -> Path | None:
@@ -68,7 +68,7 @@ def _compare(graph: PoseGraph, count: int, repeats: int) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--nodes", type=int, nargs="+", default=[1, 100, 1000, 0])
-    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--repeats", type=at_least(1), default=3)
     parser.add_argument("--graph", help="a graph file (default: sphere2500)")
     args = parser.parse_args()
     path = Path(args.graph) if args.graph else default_graph()

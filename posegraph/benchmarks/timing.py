@@ -1,5 +1,5 @@
-"""Best-of-n wall-clock timing, and the timing options shared by the benchmark scripts and
-``posegraph bench``."""
+"""Best-of-n wall-clock timing, its options, and the ``at_least`` argument type: shared by the
+benchmark scripts and the ``posegraph`` command."""
 
 from __future__ import annotations
 
