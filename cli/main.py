@@ -113,8 +113,9 @@ def _parser() -> argparse.ArgumentParser:
         "--robust",
         metavar="KERNEL[:WIDTH]",
         help="gnc (truncated least squares by graduated non-convexity), huber, cauchy, "
-        "geman-mcclure, tukey or dcs; width in Mahalanobis units (default √χ²_dof(0.999) for "
-        "gnc, √χ²_dof(0.95) for the others)",
+        "geman-mcclure, tukey or dcs; width in Mahalanobis units (default √χ²_k(0.999) for "
+        "gnc, √χ²_k(0.95) for the others, k the directions a measurement weighs: 3 for an SE3 "
+        "position-only fix)",
     )
     opt.add_argument(
         "--robust-edges",

@@ -10,7 +10,7 @@ import numpy as np
 from .anchoring import priors_as_edges
 from .factors import between_squares, chi2, prior_squares
 from .gnc import gnc_tls, tls_objective
-from .graph import PoseGraph, Solution, measured_dof
+from .graph import PoseGraph, Solution, information_ranks, measured_dof
 from .initialization import (
     align_to_priors,
     choose,
@@ -49,24 +49,51 @@ def robust_mask(graph: PoseGraph, edges: str) -> np.ndarray:
     raise ValueError(f"robust edges are {' or '.join(ROBUST_EDGE_CLASSES)}, not {edges!r}")
 
 
-def _robust_kernel(robust: str, dof: int) -> tuple[str, float]:
-    """(name, width) of a ``robust`` spec "NAME[:WIDTH]"."""
+@dataclasses.dataclass(frozen=True)
+class _Kernel:
+    """A robust spec resolved for one graph (``_robust_kernel``)."""
+
+    name: str
+    widths: np.ndarray
+    """Each edge's width c, over the robust problem's edges (``_robust_problem``: the between
+    edges, then with ``robust_priors`` the priors)."""
+    label: str
+    """The spec as the summary reports it."""
+
+
+def _robust_kernel(robust: str, graph: PoseGraph, measured: np.ndarray) -> _Kernel:
+    """The kernel of a ``robust`` spec "NAME[:WIDTH]" for ``graph``. Without a width, each
+    measurement's is √χ²_k(q) for the k directions its information weighs (its rank: 3 for an
+    SE3 position-only fix, not 6), as gtsam's GNC sets one threshold per factor dimension;
+    q is ``GNC_QUANTILE`` or ``KERNEL_QUANTILE``. The label gives the width of full-rank
+    measurements, and those of other ranks in the robust class ``measured`` (``_robust_class``)."""
     name, _, width_text = robust.partition(":")
     name = name.strip().lower()
     gnc = name in GNC_NAMES
     if not gnc and name not in KERNELS:
         raise ValueError(f"unknown robust kernel {name!r}; choose from gnc, {', '.join(KERNELS)}")
-    if not width_text:
-        return name, default_width(dof, GNC_QUANTILE if gnc else KERNEL_QUANTILE)
-    try:
-        width = float(width_text)
-    except ValueError:
-        raise ValueError(
-            f"a robust kernel's width is a number (as in {name}:2.5), not {width_text!r}"
-        ) from None
-    if not width > 0:
-        raise ValueError(f"a robust kernel's width must be positive, not {width_text}")
-    return name, width
+    if width_text:
+        try:
+            width = float(width_text)
+        except ValueError:
+            raise ValueError(
+                f"a robust kernel's width is a number (as in {name}:2.5), not {width_text!r}"
+            ) from None
+        if not width > 0:
+            raise ValueError(f"a robust kernel's width must be positive, not {width_text}")
+        return _Kernel(name, np.full(len(measured), width), f"{name}:{width:.6g}")
+    quantile = GNC_QUANTILE if gnc else KERNEL_QUANTILE
+    information = graph.edges.information
+    if len(measured) > graph.num_edges:  # the priors, as edges
+        information = np.concatenate([information, graph.priors.information])
+    ranks = information_ranks(information)
+    dof = graph.group.dof
+    by_rank = np.array([default_width(k, quantile) for k in range(1, dof + 1)])  # rank 1, 2, …
+    others = ", ".join(
+        f"rank {k}: {by_rank[k - 1]:.6g}" for k in np.unique(ranks[measured]).tolist() if k != dof
+    )
+    label = f"{name}:{by_rank[-1]:.6g}" + (f" ({others})" if others else "")
+    return _Kernel(name, by_rank[ranks - 1], label)
 
 
 def optimize(
@@ -91,8 +118,9 @@ def optimize(
     symbolic factorisation of the last call are reused; ``summary.reused`` says what was.
     ``robust``: None for least squares; "gnc" for graduated non-convexity with a truncated
     least-squares kernel (``posegraph.gnc``); or a kernel "huber", "cauchy", "geman-mcclure",
-    "tukey", "dcs"; each optionally ":WIDTH" in Mahalanobis units (default ``GNC_QUANTILE`` or
-    ``KERNEL_QUANTILE``), applied to ``robust_edges`` and, with ``robust_priors``, to the
+    "tukey", "dcs"; each optionally ":WIDTH" in Mahalanobis units (by default, per measurement,
+    √χ²_k at ``GNC_QUANTILE`` or ``KERNEL_QUANTILE`` for the k directions it weighs:
+    ``_robust_kernel``), applied to ``robust_edges`` and, with ``robust_priors``, to the
     priors too (fixes from GNSS, say; ``posegraph.anchoring``). The summary lists the rejected
     edges and priors (s = rᵀΩr > width²).
 
@@ -102,8 +130,8 @@ def optimize(
     start = time.perf_counter()
     kernel, mask = None, None
     if robust is not None:  # checked before any work is done
-        kernel = _robust_kernel(robust, graph.group.dof)
         mask = robust_mask(graph, robust_edges)
+        kernel = _robust_kernel(robust, graph, _robust_class(graph, mask, robust_priors))
     input_error = _cost(graph, kernel, mask, robust_priors) if graph.initialized.all() else None
     reused = []
     if init == "auto" and graph.optimized:
@@ -138,37 +166,40 @@ def optimize(
     return result
 
 
+def _robust_class(graph: PoseGraph, mask: np.ndarray, robust_priors: bool) -> np.ndarray:
+    """Which edges of the robust problem (``_robust_problem``) the kernel applies to: ``mask``
+    over the between edges, then, with ``robust_priors``, every prior."""
+    if not (robust_priors and len(graph.priors) > 0):
+        return mask
+    return np.concatenate([mask, np.ones(len(graph.priors), dtype=bool)])
+
+
 def _robust_problem(
     graph: PoseGraph, mask: np.ndarray, robust_priors: bool
 ) -> tuple[PoseGraph, np.ndarray]:
     """(graph, robust class) as the robust solvers see them: with ``robust_priors``, the
     priors become edges from a held world node (``priors_as_edges``), in the class."""
-    if not (robust_priors and len(graph.priors) > 0):
-        return graph, mask
-    measured = np.concatenate([mask, np.ones(len(graph.priors), dtype=bool)])
-    return priors_as_edges(graph), measured
+    measured = _robust_class(graph, mask, robust_priors)
+    return (graph if len(measured) == graph.num_edges else priors_as_edges(graph)), measured
 
 
-def _cost(
-    graph: PoseGraph, kernel: tuple[str, float] | None, mask: np.ndarray, robust_priors: bool
-) -> float:
+def _cost(graph: PoseGraph, kernel: _Kernel | None, mask: np.ndarray, robust_priors: bool) -> float:
     """The cost ``optimize`` minimises, at the graph's values: ½ Σ rᵀΩr in least squares
     (``kernel`` None); else ½ Σ ρ(s) over the robust class and ½ Σ s over the rest, with
     ρ(s) = min(s, c²) for GNC (truncated least squares) or the kernel's ρ."""
     if kernel is None:
         return 0.5 * chi2(graph.values, graph.edges, graph.priors)
     work, measured = _robust_problem(graph, mask, robust_priors)
-    name, width = kernel
-    if name in GNC_NAMES:
-        return 0.5 * tls_objective(work, work.values, measured, width**2)
-    weighting = Robustifier(RobustKernel(name, width), measured)
+    if kernel.name in GNC_NAMES:
+        return 0.5 * tls_objective(work, work.values, measured, kernel.widths**2)
+    weighting = Robustifier(RobustKernel(kernel.name, kernel.widths[measured]), measured)
     costs, _ = weighting.cost_and_weights(between_squares(work.values, work.edges))
     return 0.5 * float(costs.sum() + prior_squares(work.values, work.priors).sum())
 
 
 def _robust_solve(
     graph: PoseGraph,
-    kernel: tuple[str, float],
+    kernel: _Kernel,
     mask: np.ndarray,
     robust_priors: bool,
     options: SolverOptions,
@@ -178,23 +209,22 @@ def _robust_solve(
     weights), the weights those of the solution (0 where rejected). The summary records the
     kernel and the rejected edges and priors; its errors are the robust cost (``_cost``)."""
     work, measured = _robust_problem(graph, mask, robust_priors)
-    name, width = kernel
-    if name in GNC_NAMES:
-        outcome = gnc_tls(work, measured, width, options, callback)
+    if kernel.name in GNC_NAMES:
+        outcome = gnc_tls(work, measured, kernel.widths, options, callback)
         result, rejected = outcome.result, outcome.rejected
         weights = np.ones(work.num_edges)
         weights[rejected] = 0.0
     else:
-        weighting = Robustifier(RobustKernel(name, width), measured)
+        weighting = Robustifier(RobustKernel(kernel.name, kernel.widths[measured]), measured)
         result = solve(work, options, callback, weighting=weighting)
         s = between_squares(result.values, work.edges)
-        rejected = np.flatnonzero(measured & (s > width**2))
+        rejected = np.flatnonzero(measured & (s > kernel.widths**2))
         _, weights = weighting.cost_and_weights(s)
     anchored = work is not graph
     if anchored:  # the world node is last; the system and linearisation are work's
         result = Result(result.values[: graph.num_nodes], result.summary)
     count = graph.num_edges
-    result.summary.robust = f"{name}:{width:.6g}"
+    result.summary.robust = kernel.label
     result.summary.rejected_edges = rejected[rejected < count].tolist()
     result.summary.rejected_priors = (rejected[rejected >= count] - count).tolist()
     prior_weights = weights[count:] if anchored else np.ones(len(graph.priors))

@@ -2,7 +2,8 @@
 Carlone 2020, "Graduated Non-Convexity for Robust Spatial Perception", Alg. 1), then a
 consistency pass and a local search.
 
-1. Solve least squares; set μ = c²/(2 s_max − c²), where the surrogate is convex.
+1. Solve least squares; set μ = min c²/(2s − c²) over the edges with s > c² (c²/(2 s_max − c²)
+   for one width), where the surrogate is convex.
 2. Repeat: weigh the edges by the TLS-GNC weights of their current residuals, solve the weighted
    problem, raise μ by 1.4; until the weights are binary. Edges of weight 0 are left out of the
    linear system (the random fill-in of false loops would dominate the cost).
@@ -135,9 +136,12 @@ class _Run:
         )
 
 
-def tls_objective(graph: PoseGraph, values: LieGroup, mask: np.ndarray, width_sq: float) -> float:
+def tls_objective(
+    graph: PoseGraph, values: LieGroup, mask: np.ndarray, width_sq: float | np.ndarray
+) -> float:
     """Σ min(s, c²) over the between edges in ``mask``, plus Σ s over the other edges and the
-    priors, at ``values``: twice the cost that GNC-TLS minimises."""
+    priors, at ``values``: twice the cost that GNC-TLS minimises. ``width_sq`` c² is one for
+    every edge or one per edge."""
     s = between_squares(values, graph.edges)
     truncated = np.where(mask, np.minimum(s, width_sq), s).sum()
     return float(truncated + prior_squares(values, graph.priors).sum())
@@ -151,15 +155,15 @@ def _stages(graph, mask, width_sq, options, start: Result, restart: bool, run: _
     result, rounds = start, 0
     s = between_squares(result.values, graph.edges)
     weights = np.ones(graph.num_edges)
-    largest = s[mask].max(initial=0.0)
-    if largest <= width_sq:
+    over = mask & (s > width_sq)
+    if not over.any():
         return result, weights
-    mu = width_sq / (2.0 * largest - width_sq)
+    mu = np.min(width_sq[over] / (2.0 * s[over] - width_sq[over]))
     active, system = None, None
     while rounds < MAX_ROUNDS:
         rounds += 1
         run.rounds += 1
-        weights[mask] = tls_gnc_weights(s[mask], width_sq, mu)
+        weights[mask] = tls_gnc_weights(s[mask], width_sq[mask], mu)
         now_active = weights > 0
         work = graph.weighted(weights)
         if active is None or not np.array_equal(now_active, active):
@@ -178,19 +182,20 @@ def _stages(graph, mask, width_sq, options, start: Result, restart: bool, run: _
 def gnc_tls(
     graph: PoseGraph,
     mask: np.ndarray,
-    width: float,
+    width: float | np.ndarray,
     options: SolverOptions | None = None,
     callback: Callback | None = None,
 ) -> GncOutcome:
     """GNC-TLS over the between edges in ``mask`` (the others are trusted), from the graph's
-    values; ``width`` c is the largest inlier residual, in Mahalanobis units.
+    values; ``width`` c is the largest inlier residual, in Mahalanobis units: one for every
+    edge, or one per edge (n,).
 
     ``callback`` receives every iteration of every solve (``IterationRecord.stage`` says which).
     When it returns True, or when ``options.time_limit`` has passed since the run began, the
     run stops after that iteration, with the values reached and the edges of the mask with
     s > c² there rejected (termination ``STOPPED`` or ``TIME_LIMIT``)."""
     options = options or SolverOptions()
-    width_sq = width**2
+    width_sq = np.broadcast_to(np.square(width, dtype=float), graph.num_edges)
     run = _Run(callback)
     initial_error = 0.5 * tls_objective(graph, graph.values, mask, width_sq)
     try:
@@ -281,7 +286,7 @@ def _readmit(graph, mask, kept, result, objective, width_sq, options, leverage, 
     if rejected.size == 0:
         return kept, None, objective
     innovation = leverage.innovations(graph.edges.subset(rejected))
-    candidates = rejected[innovation < width_sq]
+    candidates = rejected[innovation < width_sq[rejected]]
     misfit = between_squares(result.values, graph.edges)
     values = result.values
     for _ in range(MAX_CONSISTENCY_PASSES):
@@ -296,7 +301,9 @@ def _readmit(graph, mask, kept, result, objective, width_sq, options, leverage, 
         squares = deleted_residuals(
             work, values, edges=position[candidates], linear_solver=options.linear_solver
         ).squares
-        explained = (squares <= width_sq) | (squares <= (1.0 - EXPLAINED) * misfit[candidates])
+        explained = (squares <= width_sq[candidates]) | (
+            squares <= (1.0 - EXPLAINED) * misfit[candidates]
+        )
         if explained.all():
             kept, settled = _settle(
                 graph, mask, with_candidates, values, width_sq, options, run, restart=False

@@ -68,14 +68,19 @@ def information_problems(information: np.ndarray) -> tuple[np.ndarray, Callable[
     return bad, why
 
 
-def measured_dof(information: np.ndarray) -> int:
-    """Σ rank Ωₖ over (n, d, d) information matrices: the directions they weigh (2 for an SE2
-    position-only prior, not 3), counting eigenvalues above the tolerance of
+def information_ranks(information: np.ndarray) -> np.ndarray:
+    """rank Ωₖ of each of (n, d, d) information matrices: the directions it weighs (2 for an
+    SE2 position-only prior, not 3), counting eigenvalues above the tolerance of
     ``information_problems``."""
     if not len(information):
-        return 0
+        return np.zeros(0, dtype=int)
     eigenvalues = np.linalg.eigvalsh(information)
-    return int(np.count_nonzero(eigenvalues > 1e-9 * eigenvalues[:, -1:]))
+    return np.count_nonzero(eigenvalues > 1e-9 * eigenvalues[:, -1:], axis=1)
+
+
+def measured_dof(information: np.ndarray) -> int:
+    """Σ rank Ωₖ over (n, d, d) information matrices (``information_ranks``)."""
+    return int(information_ranks(information).sum())
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

@@ -26,17 +26,18 @@ KERNELS = ("huber", "cauchy", "geman-mcclure", "tukey", "dcs")
 
 @dataclasses.dataclass(frozen=True)
 class RobustKernel:
-    """A kernel by name and width c (residual units)."""
+    """A kernel by name and width c (residual units): one for every s, or one per s (an array
+    of the shape of the s it is applied to)."""
 
     name: str
-    width: float
+    width: float | np.ndarray
 
     def __post_init__(self) -> None:
         if self.name not in KERNELS:
             raise ValueError(
                 f"unknown robust kernel {self.name!r}; choose from {', '.join(KERNELS)}"
             )
-        if not self.width > 0:
+        if not np.all(np.asarray(self.width) > 0):
             raise ValueError(f"a robust kernel's width must be positive, not {self.width}")
 
     def cost(self, s: np.ndarray) -> np.ndarray:
@@ -92,7 +93,7 @@ class Robustifier:
         return cost, weights
 
 
-def tls_gnc_weights(s: np.ndarray, width_sq: float, mu: float) -> np.ndarray:
+def tls_gnc_weights(s: np.ndarray, width_sq: float | np.ndarray, mu: float) -> np.ndarray:
     """Weights of the truncated-least-squares kernel's GNC surrogate (Yang, Antonante, Tzoumas &
     Carlone 2020, "Graduated Non-Convexity for Robust Spatial Perception", eq. 14):
     1 for s ≤ μ c²/(μ+1), 0 for s ≥ (μ+1) c²/μ, and c √(μ(μ+1)/s) − μ between."""

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import scipy.stats as scipy_stats
 from posegraph_datasets.generators import manhattan_world, resimulate, sphere
 from posegraph_datasets.outliers import add_false_loops, rejection_rates, without_priors
 from posegraph_datasets.paths import BENCHMARK_GRAPHS, BEST_KNOWN_ERROR
@@ -376,6 +377,59 @@ def test_gnc_rejects_false_fixes_with_robust_priors(fraction):
     assert error(result) < 1e-3
     loops_only = posegraph.optimize(graph.copy(), robust="gnc")
     assert loops_only.summary.rejected_priors == [] and error(loops_only) > 0.1
+
+
+def _gnss_with_a_bad_fix(offset: float) -> PoseGraph:
+    """``gnss_track`` (SE3, position-only fixes of σ 1 m) with its 6th fix moved ``offset``
+    metres sideways."""
+    graph, _ = gnss_track(SE3, 0.3, seed=4)
+    fixes = graph.priors.measurements.as_matrix()
+    fixes[5, 1, 3] += offset
+    graph.priors = graph.priors.__class__(
+        graph.priors.i, graph.priors.j, SE3.from_matrix(fixes), graph.priors.information
+    )
+    return graph
+
+
+@pytest.mark.parametrize("offset", [3.0, 4.0])
+def test_gnc_gates_a_position_only_fix_at_the_chi2_quantile_of_its_three_directions(offset):
+    """A fix that weighs 3 directions has the width √χ²₃(0.999) (scipy.stats here), not SE3's
+    √χ²₆(0.999). GNC keeps the moved fix exactly when keeping it costs less than rejecting it:
+    when twice the least-squares error with it, less that without it, is below χ²₃(0.999).
+    At 4 m that difference (20.3) lies between χ²₃ (16.3) and χ²₆ (22.5): the fix was kept
+    when every measurement had SE3's width."""
+    graph = _gnss_with_a_bad_fix(offset)
+    narrow, wide = scipy_stats.chi2.ppf(0.999, [3, 6])
+    unmoved = np.arange(len(graph.priors)) != 5
+    with_fix = posegraph.optimize(graph.copy()).summary.final_error
+    without_fix = posegraph.optimize(without_priors(graph, ~unmoved)).summary.final_error
+    cost_of_keeping = 2.0 * (with_fix - without_fix)
+    assert cost_of_keeping < wide
+
+    result = posegraph.optimize(graph, robust="gnc", robust_priors=True)
+    assert result.summary.rejected_priors == ([5] if cost_of_keeping > narrow else [])
+    assert result.summary.robust == f"gnc:{np.sqrt(wide):.6g} (rank 3: {np.sqrt(narrow):.6g})"
+    squares = weighted_squares(
+        prior_residuals(result.values, graph.priors), graph.priors.information
+    )
+    odometry = between_squares(result.values, graph.edges).sum()
+    assert result.summary.final_error == pytest.approx(
+        0.5 * (odometry + np.minimum(squares, narrow).sum()), rel=1e-9
+    )
+
+
+def test_irls_kernels_weigh_a_position_only_fix_by_the_width_of_its_three_directions():
+    """Huber on position-only fixes: each prior's weight is min(1, c/√s) with c = √χ²₃(0.95)."""
+    graph = _gnss_with_a_bad_fix(4.0)
+    result = posegraph.optimize(graph, robust="huber", robust_priors=True)
+    squares = weighted_squares(
+        prior_residuals(result.values, graph.priors), graph.priors.information
+    )
+    width = np.sqrt(scipy_stats.chi2.ppf(KERNEL_QUANTILE, 3))
+    assert squares[5] > width**2
+    np.testing.assert_allclose(
+        graph.solution.prior_weights, np.minimum(1.0, width / np.sqrt(squares)), rtol=1e-6
+    )
 
 
 def test_robust_priors_on_a_graph_without_priors_change_nothing():
