@@ -6,6 +6,8 @@ import dataclasses
 import time
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from .anchoring import priors_as_edges
 from .factors import between_squares, chi2, prior_squares
@@ -19,7 +21,7 @@ from .initialization import (
     spanning_tree_values,
 )
 from .robust import KERNELS, Robustifier, RobustKernel, default_width
-from .solvers import Callback, Result, SolverOptions
+from .solvers import STOPPED, TIME_LIMIT, Callback, Result, SolverOptions
 from .solvers import optimize as solve
 
 ROBUST_EDGE_CLASSES = ("loops", "all")
@@ -122,23 +124,36 @@ def optimize(
     √χ²_k at ``GNC_QUANTILE`` or ``KERNEL_QUANTILE`` for the k directions it weighs:
     ``_robust_kernel``), applied to ``robust_edges`` and, with ``robust_priors``, to the
     priors too (fixes from GNSS, say; ``posegraph.anchoring``). The summary lists the rejected
-    edges and priors (s = rᵀΩr > width²).
+    edges and priors (s = rᵀΩr > width²). A GNC call runs the whole of GNC again, unless all
+    that was added since the last one is new poses hanging off the map by trusted edges: then
+    its decisions stand (``_standing_decisions``), and it solves over them.
 
     The graph's values are replaced by the initial ones; the result holds the optimum.
     """
     options = options or SolverOptions()
     start = time.perf_counter()
-    kernel, mask = None, None
+    kernel, mask, gnc_problem, standing = None, None, None, None
     if robust is not None:  # checked before any work is done
         mask = robust_mask(graph, robust_edges)
-        kernel = _robust_kernel(robust, graph, _robust_class(graph, mask, robust_priors))
+        measured = _robust_class(graph, mask, robust_priors)
+        kernel = _robust_kernel(robust, graph, measured)
+        if kernel.name in GNC_NAMES:
+            priors = " and priors" if robust_priors else ""
+            gnc_problem = f"{kernel.label} on {robust_edges}{priors}"
     input_error = _cost(graph, kernel, mask, robust_priors) if graph.initialized.all() else None
     reused = []
     if init == "auto" and graph.optimized:
         solved = int(graph.initialized.sum())
+        if gnc_problem is not None:
+            standing = _standing_decisions(graph, measured, gnc_problem)
         init = _warm_start(graph, options, least_squares=robust is None)
         if init == "warm start":
             reused.append(f"previous solution ({solved} nodes)")
+        if standing is not None:
+            reused.append(
+                f"GNC's decisions ({np.count_nonzero(~standing)} rejected; nothing added since"
+                " is under the kernel)"
+            )
     elif init == "file":
         graph.require_values("add them with values or use init='auto'")
     else:
@@ -154,15 +169,19 @@ def optimize(
         edge_weights, prior_weights = np.ones(graph.num_edges), np.ones(len(graph.priors))
     else:
         result, edge_weights, prior_weights = _robust_solve(
-            graph, kernel, mask, robust_priors, options, callback
+            graph, kernel, mask, robust_priors, options, callback, standing
         )
+        if result.summary.termination in (STOPPED, TIME_LIMIT):
+            gnc_problem = None  # its decisions are not final
     result.summary.initialization = init
     result.summary.initialization_time = init_time
     result.summary.reused = reused + result.summary.reused
     result.summary.input_error = input_error
     result.summary.total_time = time.perf_counter() - start
     graph.set_values(result.values)
-    graph.solution = Solution(graph.edges, graph.priors, edge_weights, prior_weights)
+    graph.solution = Solution(
+        graph.edges, graph.priors, edge_weights, prior_weights, graph.fixed.copy(), gnc_problem
+    )
     return result
 
 
@@ -204,13 +223,15 @@ def _robust_solve(
     robust_priors: bool,
     options: SolverOptions,
     callback: Callback | None,
+    standing: np.ndarray | None = None,
 ) -> tuple[Result, np.ndarray, np.ndarray]:
     """The robust branch of ``optimize``, from the graph's values: (result, edge weights, prior
     weights), the weights those of the solution (0 where rejected). The summary records the
-    kernel and the rejected edges and priors; its errors are the robust cost (``_cost``)."""
+    kernel and the rejected edges and priors; its errors are the robust cost (``_cost``).
+    ``standing``: GNC's decisions that stand (``_standing_decisions``), if any."""
     work, measured = _robust_problem(graph, mask, robust_priors)
     if kernel.name in GNC_NAMES:
-        outcome = gnc_tls(work, measured, kernel.widths, options, callback)
+        outcome = gnc_tls(work, measured, kernel.widths, options, callback, kept=standing)
         result, rejected = outcome.result, outcome.rejected
         weights = np.ones(work.num_edges)
         weights[rejected] = 0.0
@@ -245,6 +266,47 @@ def _warm_start(graph: PoseGraph, options: SolverOptions, least_squares: bool) -
         graph.set_values(initialize(graph, "chordal"))
         return RESTART
     return "warm start"
+
+
+def _standing_decisions(graph: PoseGraph, measured: np.ndarray, problem: str) -> np.ndarray | None:
+    """The edges of the robust problem (``_robust_problem``) that the last GNC run kept, if its
+    decisions stand for ``graph``; else None. They stand when that run solved the same
+    ``problem`` to its end, and all that was added since is a tree of trusted between edges
+    that hangs free new nodes off the solved ones: nothing in the robust class ``measured``, no
+    prior, no hold, no cycle. The TLS problem over the solved nodes is then unchanged, and each
+    new node has one place that fits its edges exactly, so the decisions are as good for the
+    grown graph as they were for the old one, and a least-squares solve over them ends it."""
+    solution = graph.solution
+    if solution.gnc != problem:
+        return None
+    old = len(solution.fixed)
+    new_edges = np.arange(len(solution.edges), graph.num_edges)
+    if not (
+        graph.edges.starts_with(solution.edges)
+        and len(graph.priors) == len(solution.priors)
+        and graph.priors.starts_with(solution.priors)
+        and np.array_equal(graph.fixed[:old], solution.fixed)
+        and not graph.fixed[old:].any()
+        and not measured[new_edges].any()
+        and _hangs_a_tree(graph.edges.i[new_edges], graph.edges.j[new_edges], old, graph.num_nodes)
+    ):
+        return None
+    kept = [solution.edge_weights > 0, np.ones(new_edges.size, dtype=bool)]
+    if len(measured) > graph.num_edges:  # the priors, as edges
+        kept.append(solution.prior_weights > 0)
+    return np.concatenate(kept)
+
+
+def _hangs_a_tree(i: np.ndarray, j: np.ndarray, old: int, count: int) -> bool:
+    """Whether edges (i, j) over nodes 0 … count − 1 form a tree over the nodes from ``old`` on
+    and the nodes before ``old`` taken as one: one edge per new node, and all connected."""
+    new = count - old
+    if len(i) != new:
+        return False
+    # The old nodes become node 0, and new node k becomes k − old + 1.
+    ends = np.maximum(np.stack([i, j]) - old + 1, 0)
+    adjacency = coo_matrix((np.ones(new), (ends[0], ends[1])), shape=(new + 1, new + 1))
+    return connected_components(adjacency, directed=False)[0] == 1
 
 
 def _agree_with_solution(graph: PoseGraph) -> bool:

@@ -185,6 +185,7 @@ def gnc_tls(
     width: float | np.ndarray,
     options: SolverOptions | None = None,
     callback: Callback | None = None,
+    kept: np.ndarray | None = None,
 ) -> GncOutcome:
     """GNC-TLS over the between edges in ``mask`` (the others are trusted), from the graph's
     values; ``width`` c is the largest inlier residual, in Mahalanobis units: one for every
@@ -193,13 +194,19 @@ def gnc_tls(
     ``callback`` receives every iteration of every solve (``IterationRecord.stage`` says which).
     When it returns True, or when ``options.time_limit`` has passed since the run began, the
     run stops after that iteration, with the values reached and the edges of the mask with
-    s > c² there rejected (termination ``STOPPED`` or ``TIME_LIMIT``)."""
+    s > c² there rejected (termination ``STOPPED`` or ``TIME_LIMIT``).
+
+    ``kept``, decisions known to stand (the edges to keep, ``posegraph.api``), skips the search:
+    the kept edges are solved for in least squares, and the others are rejected."""
     options = options or SolverOptions()
     width_sq = np.broadcast_to(np.square(width, dtype=float), graph.num_edges)
     run = _Run(callback)
     initial_error = 0.5 * tls_objective(graph, graph.values, mask, width_sq)
     try:
-        kept, result = _search(graph, mask, width_sq, options, run)
+        if kept is None:
+            kept, result = _search(graph, mask, width_sq, options, run)
+        else:
+            result = run.solve(graph.with_edges(kept), options, "carried decisions")
     except _Stopped as stopped:
         result = stopped.result
         kept = ~mask | (between_squares(result.values, graph.edges) <= width_sq)

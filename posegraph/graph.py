@@ -143,6 +143,12 @@ class Solution:
     priors: EdgeSet
     edge_weights: np.ndarray
     prior_weights: np.ndarray
+    fixed: np.ndarray
+    """Which of the nodes then in the graph were held."""
+    gnc: str | None = None
+    """The robust problem (kernel, edge class, priors or not) whose graduated non-convexity
+    ran to its end here; None in least squares, with an IRLS kernel, or where the run stopped
+    early. A later call may carry its decisions (``posegraph.api``)."""
 
     def weights_for(self, edges: EdgeSet, priors: EdgeSet) -> tuple[np.ndarray, np.ndarray]:
         """The weights of ``edges`` and of ``priors``: the solution's for the measurements it was

@@ -19,6 +19,7 @@ from posegraph.graph import PoseGraph
 from posegraph.io import write_graph
 from posegraph.lie import SE2, SE3, Sim3
 from posegraph.linear import NormalEquations
+from posegraph.solvers import STOPPED
 from posegraph.sparse_cholesky import COUPLED_COLUMNS, SOLVED_COLUMNS
 
 from .conftest import random_graph
@@ -300,6 +301,86 @@ def test_streaming_with_false_loops_rejects_them_as_a_batch_call_does(tmp_path):
     exactly_the_false_loops = "100.0% of the false loops and 0.00% of the true ones"
     assert f"reject {exactly_the_false_loops} (warm), {exactly_the_false_loops} (scratch)" in report
     assert "(3 optimisations)" in report
+
+
+def _city_with_false_loops() -> tuple[PoseGraph, np.ndarray]:
+    graph, _ = manhattan_world(num_poses=150, seed=93)
+    return add_false_loops(graph, 0.1, seed=1)
+
+
+def _drive_on(graph: PoseGraph, poses: int) -> None:
+    """Append ``poses`` new poses without values, each by an odometry edge from the last."""
+    last = int(graph.node_ids[-1])
+    for k in range(last + 1, last + 1 + poses):
+        graph.add_node(k)
+        graph.add_edge(k - 1, k, SE2.from_xytheta([1.0, 0.1, 0.05]), np.eye(3) * 100.0)
+
+
+def _stages(summary) -> set[str]:
+    return {record.stage for record in summary.iterations}
+
+
+def test_gnc_decisions_stand_when_only_trusted_odometry_was_added():
+    """New poses that hang off the map by odometry alone leave the TLS problem over the solved
+    poses as it was: the call keeps GNC's decisions and solves over them in least squares,
+    and ends where GNC run again on the grown graph ends."""
+    graph, false = _city_with_false_loops()
+    first = posegraph.optimize(graph, robust="gnc")
+    assert first.summary.rejected_edges == np.flatnonzero(false).tolist()
+    _drive_on(graph, 5)
+    grown = graph.copy()
+    second = posegraph.optimize(graph, robust="gnc")
+    assert second.summary.rejected_edges == first.summary.rejected_edges
+    assert f"GNC's decisions ({false.sum()} rejected" in ", ".join(second.summary.reused)
+    assert _stages(second.summary) <= {"carried decisions"} and second.summary.converged
+    assert second.summary.final_error == pytest.approx(first.summary.final_error, rel=1e-9)
+    np.testing.assert_allclose(second.values[:150].as_matrix(), first.values.as_matrix(), atol=1e-9)
+    grown.solution = None
+    again = posegraph.optimize(grown, robust="gnc")
+    assert "least squares" in _stages(again.summary)
+    assert again.summary.rejected_edges == second.summary.rejected_edges
+    np.testing.assert_allclose(second.values.as_matrix(), again.values.as_matrix(), atol=1e-6)
+
+
+def _add_loop(graph: PoseGraph) -> None:
+    graph.add_edge(3, 140, SE2.from_xytheta([5.0, 0.0, 0.0]), np.eye(3) * 100.0)
+
+
+def _add_second_odometry(graph: PoseGraph) -> None:
+    graph.add_edge(10, 11, graph.edges.measurements[10], graph.edges.information[10])
+
+
+def _add_prior(graph: PoseGraph) -> None:
+    graph.add_prior(151, SE2.from_xytheta([0.0, 0.0, 0.0]), np.eye(3))
+
+
+@pytest.mark.parametrize(
+    "change, robust",
+    [
+        (_add_loop, "gnc"),
+        (_add_second_odometry, "gnc"),
+        (_add_prior, "gnc"),
+        (lambda graph: graph.fix([151]), "gnc"),
+        (lambda graph: None, "gnc:3"),
+    ],
+    ids=["a new loop", "a cycle of trusted edges", "a prior", "a hold", "another width"],
+)
+def test_gnc_decides_again_when_what_was_added_could_change_its_decisions(change, robust):
+    graph, _ = _city_with_false_loops()
+    posegraph.optimize(graph, robust="gnc")
+    _drive_on(graph, 5)
+    change(graph)
+    summary = posegraph.optimize(graph, robust=robust).summary
+    assert "least squares" in _stages(summary)
+    assert not any("GNC's decisions" in reuse for reuse in summary.reused)
+
+
+def test_gnc_decides_again_after_a_run_that_was_stopped():
+    graph, _ = _city_with_false_loops()
+    stopped = posegraph.optimize(graph, robust="gnc", callback=lambda record: True)
+    assert stopped.summary.termination == STOPPED
+    summary = posegraph.optimize(graph, robust="gnc").summary
+    assert "least squares" in _stages(summary) and "carried decisions" not in _stages(summary)
 
 
 def test_a_warm_start_restarts_when_new_loops_disagree_with_the_solution():
