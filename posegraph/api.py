@@ -51,7 +51,7 @@ def robust_mask(graph: PoseGraph, edges: str) -> np.ndarray:
     raise ValueError(f"robust edges are {' or '.join(ROBUST_EDGE_CLASSES)}, not {edges!r}")
 
 
-@dataclasses.dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True, eq=False)
 class _Kernel:
     """A robust spec resolved for one graph (``_robust_kernel``)."""
 
