@@ -4,49 +4,62 @@ from __future__ import annotations
 
 import argparse
 import itertools
-import time
 
 import pytest
 
+from posegraph.benchmarks import timing
 from posegraph.benchmarks.timing import add_timing_arguments, best_run
 
 SETUP = 0.05
-"""Seconds each setup sleeps: a timed setup would make every run last at least this long."""
+"""Seconds each setup takes: a timed setup would make every run last at least this long."""
 
 
-def _timed_sleeps(pauses: list[float]):
-    """(function, setup, calls) for ``best_run``: the k-th run sleeps ``pauses[k]`` seconds
-    and returns k; ``calls`` counts the setups."""
+class _Clock:
+    """A stand-in for the ``time`` module whose clock moves only when told: the tests do not
+    depend on how long the machine takes to sleep."""
+
+    def __init__(self) -> None:
+        self.now = 0.0
+
+    def perf_counter(self) -> float:
+        return self.now
+
+
+def _timed_runs(monkeypatch, pauses: list[float]):
+    """(function, setup, calls, clock) for ``best_run`` on a ``_Clock``: each setup takes
+    ``SETUP`` seconds, the k-th run takes ``pauses[k]`` seconds and returns k, and ``calls``
+    counts the setups."""
+    clock = _Clock()
+    monkeypatch.setattr(timing, "time", clock)
     calls = itertools.count()
     remaining = iter(pauses)
 
     def setup() -> int:
-        time.sleep(SETUP)
+        clock.now += SETUP
         return next(calls)
 
     def function(call: int) -> int:
-        time.sleep(next(remaining))
+        clock.now += next(remaining)
         return call
 
-    return function, setup, calls
+    return function, setup, calls, clock
 
 
-def test_best_run_returns_the_shortest_runs_time_and_output_without_the_setup():
-    function, setup, _ = _timed_sleeps([0.02, 0.001, 0.01])
+def test_best_run_returns_the_shortest_runs_time_and_output_without_the_setup(monkeypatch):
+    function, setup, _, _ = _timed_runs(monkeypatch, [0.02, 0.001, 0.01])
     best, output = best_run(function, repeats=3, setup=setup)
     assert output == 1
-    assert 0.001 <= best < SETUP
+    assert best == pytest.approx(0.001)
 
 
-def test_best_run_runs_at_least_repeats_times_and_until_the_budget_is_spent():
-    function, setup, calls = _timed_sleeps([0.001] * 100)
+def test_best_run_runs_at_least_repeats_times_and_until_the_budget_is_spent(monkeypatch):
+    function, setup, calls, _ = _timed_runs(monkeypatch, [0.001] * 100)
     best_run(function, repeats=2, setup=setup)
     assert next(calls) == 2
-    function, setup, calls = _timed_sleeps([0.001] * 100)
-    start = time.perf_counter()
+    function, setup, calls, clock = _timed_runs(monkeypatch, [0.001] * 100)
     best_run(function, repeats=2, budget=0.3, setup=setup)
-    assert time.perf_counter() - start >= 0.3
-    assert next(calls) >= 4
+    assert clock.now >= 0.3
+    assert next(calls) == 6  # 0.051 s a run: the sixth ends past 0.3 s
 
 
 @pytest.mark.parametrize(
