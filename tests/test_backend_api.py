@@ -22,7 +22,7 @@ from posegraph.linear import NormalEquations
 from posegraph.solvers import STOPPED
 from posegraph.sparse_cholesky import COUPLED_COLUMNS, SOLVED_COLUMNS
 
-from .conftest import random_graph
+from .conftest import city_with_fixes, random_graph
 
 
 def test_batch_and_single_editing_with_arrays():
@@ -340,6 +340,27 @@ def test_gnc_decisions_stand_when_only_trusted_odometry_was_added():
     assert "least squares" in _stages(again.summary)
     assert again.summary.rejected_edges == second.summary.rejected_edges
     np.testing.assert_allclose(second.values.as_matrix(), again.values.as_matrix(), atol=1e-6)
+
+
+def test_gnc_decisions_on_loops_and_priors_stand_when_only_odometry_was_added():
+    """With ``robust_priors`` the robust problem holds the priors too, as edges after the
+    between edges: the carried decisions keep the rejected fixes out as well."""
+    graph, false_fixes = city_with_fixes(0.3, seed=0)
+    graph, false_loops = add_false_loops(graph, 0.1, seed=2)
+    first = posegraph.optimize(graph, robust="gnc", robust_priors=True)
+    assert first.summary.rejected_priors == np.flatnonzero(false_fixes).tolist()
+    assert first.summary.rejected_edges == np.flatnonzero(false_loops).tolist()
+    _drive_on(graph, 5)
+    grown = graph.copy()
+    grown.solution = None
+    second = posegraph.optimize(graph, robust="gnc", robust_priors=True)
+    again = posegraph.optimize(grown, robust="gnc", robust_priors=True)
+    assert "least squares" not in _stages(second.summary)
+    assert "least squares" in _stages(again.summary)
+    assert second.summary.rejected_priors == again.summary.rejected_priors
+    assert second.summary.rejected_edges == again.summary.rejected_edges
+    np.testing.assert_allclose(second.values.as_matrix(), again.values.as_matrix(), atol=1e-6)
+    np.testing.assert_array_equal(graph.solution.prior_weights, (~false_fixes).astype(float))
 
 
 def _add_loop(graph: PoseGraph) -> None:
