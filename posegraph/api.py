@@ -132,15 +132,14 @@ def optimize(
     """
     options = options or SolverOptions()
     start = time.perf_counter()
-    kernel, mask, gnc_problem, standing = None, None, None, None
+    kernel, measured, gnc_problem, standing = None, None, None, None
     if robust is not None:  # checked before any work is done
-        mask = robust_mask(graph, robust_edges)
-        measured = _robust_class(graph, mask, robust_priors)
+        measured = _robust_class(graph, robust_mask(graph, robust_edges), robust_priors)
         kernel = _robust_kernel(robust, graph, measured)
         if kernel.name in GNC_NAMES:
             priors = " and priors" if robust_priors else ""
             gnc_problem = f"{kernel.label} on {robust_edges}{priors}"
-    input_error = _cost(graph, kernel, mask, robust_priors) if graph.initialized.all() else None
+    input_error = _cost(graph, kernel, measured) if graph.initialized.all() else None
     reused = []
     if init == "auto" and graph.optimized:
         solved = int(graph.initialized.sum())
@@ -169,7 +168,7 @@ def optimize(
         edge_weights, prior_weights = np.ones(graph.num_edges), np.ones(len(graph.priors))
     else:
         result, edge_weights, prior_weights = _robust_solve(
-            graph, kernel, mask, robust_priors, options, callback, standing
+            graph, kernel, measured, options, callback, standing
         )
         if result.summary.termination in (STOPPED, TIME_LIMIT):
             gnc_problem = None  # its decisions are not final
@@ -193,22 +192,20 @@ def _robust_class(graph: PoseGraph, mask: np.ndarray, robust_priors: bool) -> np
     return np.concatenate([mask, np.ones(len(graph.priors), dtype=bool)])
 
 
-def _robust_problem(
-    graph: PoseGraph, mask: np.ndarray, robust_priors: bool
-) -> tuple[PoseGraph, np.ndarray]:
-    """(graph, robust class) as the robust solvers see them: with ``robust_priors``, the
-    priors become edges from a held world node (``priors_as_edges``), in the class."""
-    measured = _robust_class(graph, mask, robust_priors)
-    return (graph if len(measured) == graph.num_edges else priors_as_edges(graph)), measured
+def _robust_problem(graph: PoseGraph, measured: np.ndarray) -> PoseGraph:
+    """The graph as the robust solvers see it, for the robust class ``measured``
+    (``_robust_class``): where that class holds the priors, they become edges from a held
+    world node (``priors_as_edges``)."""
+    return graph if len(measured) == graph.num_edges else priors_as_edges(graph)
 
 
-def _cost(graph: PoseGraph, kernel: _Kernel | None, mask: np.ndarray, robust_priors: bool) -> float:
+def _cost(graph: PoseGraph, kernel: _Kernel | None, measured: np.ndarray | None) -> float:
     """The cost ``optimize`` minimises, at the graph's values: ½ Σ rᵀΩr in least squares
     (``kernel`` None); else ½ Σ ρ(s) over the robust class and ½ Σ s over the rest, with
     ρ(s) = min(s, c²) for GNC (truncated least squares) or the kernel's ρ."""
     if kernel is None:
         return 0.5 * chi2(graph.values, graph.edges, graph.priors)
-    work, measured = _robust_problem(graph, mask, robust_priors)
+    work = _robust_problem(graph, measured)
     if kernel.name in GNC_NAMES:
         return 0.5 * tls_objective(work, work.values, measured, kernel.widths**2)
     weighting = Robustifier(RobustKernel(kernel.name, kernel.widths[measured]), measured)
@@ -219,8 +216,7 @@ def _cost(graph: PoseGraph, kernel: _Kernel | None, mask: np.ndarray, robust_pri
 def _robust_solve(
     graph: PoseGraph,
     kernel: _Kernel,
-    mask: np.ndarray,
-    robust_priors: bool,
+    measured: np.ndarray,
     options: SolverOptions,
     callback: Callback | None,
     standing: np.ndarray | None = None,
@@ -228,8 +224,9 @@ def _robust_solve(
     """The robust branch of ``optimize``, from the graph's values: (result, edge weights, prior
     weights), the weights those of the solution (0 where rejected). The summary records the
     kernel and the rejected edges and priors; its errors are the robust cost (``_cost``).
-    ``standing``: GNC's decisions that stand (``_standing_decisions``), if any."""
-    work, measured = _robust_problem(graph, mask, robust_priors)
+    ``measured`` is the robust class (``_robust_class``); ``standing``, GNC's decisions that
+    stand (``_standing_decisions``), if any."""
+    work = _robust_problem(graph, measured)
     if kernel.name in GNC_NAMES:
         outcome = gnc_tls(work, measured, kernel.widths, options, callback, kept=standing)
         result, rejected = outcome.result, outcome.rejected
