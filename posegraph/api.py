@@ -41,14 +41,44 @@ KERNEL_QUANTILE = 0.95
 """Default width of the IRLS kernels (Huber, Cauchy, …): √χ²_dof(0.95), Huber's usual choice."""
 
 
-def robust_mask(graph: PoseGraph, edges: str) -> np.ndarray:
-    """Which between edges a robust kernel applies to: "loops" (not between consecutive nodes)
-    or "all"."""
-    if edges == "loops":
-        return ~odometry_mask(graph)
-    if edges == "all":
-        return np.ones(graph.num_edges, dtype=bool)
-    raise ValueError(f"robust edges are {' or '.join(ROBUST_EDGE_CLASSES)}, not {edges!r}")
+def robust_mask(graph: PoseGraph, edges: str | np.ndarray) -> np.ndarray:
+    """Which between edges a robust kernel applies to: "loops" (not between consecutive nodes),
+    "all", or the caller's own class, as a boolean mask over the graph's between edges or as
+    their indices. The edges outside it are trusted (gtsam's GNC calls them known inliers)."""
+    if isinstance(edges, str):
+        if edges == "loops":
+            return ~odometry_mask(graph)
+        if edges == "all":
+            return np.ones(graph.num_edges, dtype=bool)
+        raise ValueError(
+            f"robust edges are {' or '.join(ROBUST_EDGE_CLASSES)}, a boolean mask or edge "
+            f"indices, not {edges!r}"
+        )
+    chosen = np.asarray(edges)
+    count = graph.num_edges
+    if chosen.dtype == bool:
+        if chosen.shape != (count,):
+            raise ValueError(
+                f"a robust edge mask has one entry per between edge ({count}), "
+                f"not shape {chosen.shape}"
+            )
+        return chosen.copy()
+    if chosen.size == 0:
+        return np.zeros(count, dtype=bool)
+    if chosen.ndim != 1 or not np.issubdtype(chosen.dtype, np.integer):
+        raise ValueError(
+            "robust edges given as an array are a boolean mask over the between edges or a list "
+            f"of their indices, not an array of {chosen.dtype} with shape {chosen.shape}"
+        )
+    outside = chosen[(chosen < 0) | (chosen >= count)]
+    if outside.size:
+        raise ValueError(
+            f"robust edge index {outside[0]} is not one of the graph's between edges "
+            f"(0 to {count - 1})"
+        )
+    mask = np.zeros(count, dtype=bool)
+    mask[chosen] = True
+    return mask
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -104,7 +134,7 @@ def optimize(
     options: SolverOptions | None = None,
     callback: Callback | None = None,
     robust: str | None = None,
-    robust_edges: str = "loops",
+    robust_edges: str | np.ndarray = "loops",
     robust_priors: bool = False,
 ) -> Result:
     """Initialise the graph's values by ``init``, minimise its cost, and leave the solution in
@@ -122,7 +152,8 @@ def optimize(
     least-squares kernel (``posegraph.gnc``); or a kernel "huber", "cauchy", "geman-mcclure",
     "tukey", "dcs"; each optionally ":WIDTH" in Mahalanobis units (by default, per measurement,
     √χ²_k at ``GNC_QUANTILE`` or ``KERNEL_QUANTILE`` for the k directions it weighs:
-    ``_robust_kernel``), applied to ``robust_edges`` and, with ``robust_priors``, to the
+    ``_robust_kernel``), applied to ``robust_edges`` ("loops", "all", or a boolean mask over
+    the between edges or their indices: ``robust_mask``) and, with ``robust_priors``, to the
     priors too (fixes from GNSS, say; ``posegraph.anchoring``). The summary lists the rejected
     edges and priors (s = rᵀΩr > width²). A GNC call runs the whole of GNC again, unless all
     that was added since the last one is new poses hanging off the map by trusted edges: then
@@ -137,14 +168,13 @@ def optimize(
         measured = _robust_class(graph, robust_mask(graph, robust_edges), robust_priors)
         kernel = _robust_kernel(robust, graph, measured)
         if kernel.name in GNC_NAMES:
-            priors = " and priors" if robust_priors else ""
-            gnc_problem = f"{kernel.label} on {robust_edges}{priors}"
+            gnc_problem = (kernel.label, measured)
     input_error = _cost(graph, kernel, measured) if graph.initialized.all() else None
     reused = []
     if init == "auto" and graph.optimized:
         solved = int(graph.initialized.sum())
         if gnc_problem is not None:
-            standing = _standing_decisions(graph, measured, gnc_problem)
+            standing = _standing_decisions(graph, kernel.label, measured)
         init = _warm_start(graph, options, least_squares=robust is None)
         if init == "warm start":
             reused.append(f"previous solution ({solved} nodes)")
@@ -265,23 +295,27 @@ def _warm_start(graph: PoseGraph, options: SolverOptions, least_squares: bool) -
     return "warm start"
 
 
-def _standing_decisions(graph: PoseGraph, measured: np.ndarray, problem: str) -> np.ndarray | None:
+def _standing_decisions(graph: PoseGraph, label: str, measured: np.ndarray) -> np.ndarray | None:
     """The edges of the robust problem (``_robust_problem``) that the last GNC run kept, if its
-    decisions stand for ``graph``; else None. They stand when that run solved the same
-    ``problem`` to its end, and all that was added since is a tree of trusted between edges
-    that hangs free new nodes off the solved ones: nothing in the robust class ``measured``, no
-    prior, no hold, no cycle. The TLS problem over the solved nodes is then unchanged, and each
-    new node has one place that fits its edges exactly, so the decisions are as good for the
-    grown graph as they were for the old one, and a least-squares solve over them ends it."""
+    decisions stand for ``graph``; else None. They stand when that run solved the same problem
+    to its end (the kernel ``label``, and the robust class ``measured`` the same over its
+    measurements), and all that was added since is a tree of trusted between edges that hangs
+    free new nodes off the solved ones: nothing in ``measured``, no prior, no hold, no cycle.
+    The TLS problem over the solved nodes is then unchanged, and each new node has one place
+    that fits its edges exactly, so the decisions are as good for the grown graph as they were
+    for the old one, and a least-squares solve over them ends it."""
     solution = graph.solution
-    if solution.gnc != problem:
+    if solution.gnc is None or solution.gnc[0] != label:
         return None
-    old = len(solution.fixed)
-    new_edges = np.arange(len(solution.edges), graph.num_edges)
+    measured_then = solution.gnc[1]
+    old, old_edges = len(solution.fixed), len(solution.edges)
+    new_edges = np.arange(old_edges, graph.num_edges)
     if not (
         graph.edges.starts_with(solution.edges)
         and len(graph.priors) == len(solution.priors)
         and graph.priors.starts_with(solution.priors)
+        and np.array_equal(measured[:old_edges], measured_then[:old_edges])
+        and np.array_equal(measured[graph.num_edges :], measured_then[old_edges:])
         and np.array_equal(graph.fixed[:old], solution.fixed)
         and not graph.fixed[old:].any()
         and not measured[new_edges].any()

@@ -145,10 +145,11 @@ class Solution:
     prior_weights: np.ndarray
     fixed: np.ndarray
     """Which of the nodes then in the graph were held."""
-    gnc: str | None = None
-    """The robust problem (kernel, edge class, priors or not) whose graduated non-convexity
-    ran to its end here; None in least squares, with an IRLS kernel, or where the run stopped
-    early. A later call may carry its decisions (``posegraph.api``)."""
+    gnc: tuple[str, np.ndarray] | None = None
+    """The robust problem whose graduated non-convexity ran to its end here: the kernel's label
+    and which measurements were under it (the between edges, then the priors where they were
+    too); None in least squares, with an IRLS kernel, or where the run stopped early. A later
+    call may carry its decisions (``posegraph.api``)."""
 
     def weights_for(self, edges: EdgeSet, priors: EdgeSet) -> tuple[np.ndarray, np.ndarray]:
         """The weights of ``edges`` and of ``priors``: the solution's for the measurements it was

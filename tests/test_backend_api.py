@@ -12,7 +12,7 @@ from posegraph_datasets.outliers import add_false_loops
 
 import posegraph
 from posegraph import sparse_cholesky
-from posegraph.api import RESTART
+from posegraph.api import RESTART, robust_mask
 from posegraph.benchmarks.incremental import run, stream
 from posegraph.factors import between_squares, linearize_between, linearize_priors
 from posegraph.graph import PoseGraph
@@ -375,25 +375,65 @@ def _add_prior(graph: PoseGraph) -> None:
     graph.add_prior(151, SE2.from_xytheta([0.0, 0.0, 0.0]), np.eye(3))
 
 
+def test_gnc_decisions_stand_for_the_same_edge_class_given_as_indices_then_as_a_mask():
+    """The robust class is compared edge by edge, however the caller gave it: loop closures
+    given as indices, then (after new odometry) as a mask that leaves the new edges out."""
+    graph, false = _city_with_false_loops()
+    loops = robust_mask(graph, "loops")
+    first = posegraph.optimize(graph, robust="gnc", robust_edges=np.flatnonzero(loops))
+    assert first.summary.rejected_edges == np.flatnonzero(false).tolist()
+    _drive_on(graph, 5)
+    mask = np.append(loops, np.zeros(5, dtype=bool))
+    second = posegraph.optimize(graph, robust="gnc", robust_edges=mask)
+    assert _stages(second.summary) <= {"carried decisions"}
+    assert second.summary.rejected_edges == first.summary.rejected_edges
+
+
+def _one_true_loop_trusted(graph: PoseGraph) -> np.ndarray:
+    mask = robust_mask(graph, "loops")
+    mask[np.flatnonzero(mask)[0]] = False
+    return mask
+
+
 @pytest.mark.parametrize(
-    "change, robust",
+    "change, robust, robust_edges",
     [
-        (_add_loop, "gnc"),
-        (_add_second_odometry, "gnc"),
-        (_add_prior, "gnc"),
-        (lambda graph: graph.fix([151]), "gnc"),
-        (lambda graph: None, "gnc:3"),
+        (_add_loop, "gnc", "loops"),
+        (_add_second_odometry, "gnc", "loops"),
+        (_add_prior, "gnc", "loops"),
+        (lambda graph: graph.fix([151]), "gnc", "loops"),
+        (lambda graph: None, "gnc:3", "loops"),
+        (lambda graph: None, "gnc", _one_true_loop_trusted),
     ],
-    ids=["a new loop", "a cycle of trusted edges", "a prior", "a hold", "another width"],
+    ids=[
+        "a new loop",
+        "a cycle of trusted edges",
+        "a prior",
+        "a hold",
+        "another width",
+        "one old edge left out of the class",
+    ],
 )
-def test_gnc_decides_again_when_what_was_added_could_change_its_decisions(change, robust):
+def test_gnc_decides_again_when_what_was_added_could_change_its_decisions(
+    change, robust, robust_edges
+):
     graph, _ = _city_with_false_loops()
     posegraph.optimize(graph, robust="gnc")
     _drive_on(graph, 5)
     change(graph)
-    summary = posegraph.optimize(graph, robust=robust).summary
+    if callable(robust_edges):
+        robust_edges = robust_edges(graph)
+    summary = posegraph.optimize(graph, robust=robust, robust_edges=robust_edges).summary
     assert "least squares" in _stages(summary)
     assert not any("GNC's decisions" in reuse for reuse in summary.reused)
+
+
+def test_gnc_decides_again_when_the_priors_leave_the_kernel():
+    graph, _ = city_with_fixes(0.3, seed=0)
+    posegraph.optimize(graph, robust="gnc", robust_priors=True)
+    _drive_on(graph, 5)
+    summary = posegraph.optimize(graph, robust="gnc").summary
+    assert "least squares" in _stages(summary) and not summary.rejected_priors
 
 
 def test_gnc_decides_again_after_a_run_that_was_stopped():

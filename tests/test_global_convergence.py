@@ -226,6 +226,34 @@ def test_gnc_rejects_false_loops_on_a_generated_city(fraction):
     )
 
 
+def test_robust_edges_given_by_the_caller_cover_a_closure_between_consecutive_nodes():
+    """Two robots in one graph: robot B's poses (100–199) follow robot A's (0–99), so an
+    inter-robot closure from A's last pose to B's first joins consecutive nodes, which the
+    "loops" class trusts as odometry. A false one then bends the map, and GNC rejects true loops
+    in its place. Given the class as a mask of every edge but the odometry, or as the indices
+    of those edges, GNC rejects the false closure alone and ends at the outlier-free optimum."""
+    graph, _ = manhattan_world(num_poses=200, seed=67)
+    graph.remove_edges(np.flatnonzero((graph.edges.i == 99) & (graph.edges.j == 100)).tolist())
+    closures = ~robust_mask(graph, "loops")  # the odometry, before the false closure
+    clean = posegraph.optimize(graph.copy()).values
+    graph.add_edge(99, 100, SE2.from_xytheta([3.0, -2.0, 1.0]), np.eye(3) * 100.0)
+    false_closure = graph.num_edges - 1
+    closures = ~np.append(closures, False)
+
+    def distance_to_clean(values):
+        return np.linalg.norm(values.translation - clean.translation, axis=1).max()
+
+    trusted = posegraph.optimize(graph.copy(), robust="gnc", robust_edges="loops")
+    assert false_closure not in trusted.summary.rejected_edges
+    assert distance_to_clean(trusted.values) > 0.5
+    by_mask = posegraph.optimize(graph.copy(), robust="gnc", robust_edges=closures)
+    assert by_mask.summary.rejected_edges == [false_closure]
+    assert distance_to_clean(by_mask.values) < 1e-6
+    by_index = posegraph.optimize(graph.copy(), robust="gnc", robust_edges=np.flatnonzero(closures))
+    assert by_index.summary.rejected_edges == [false_closure]
+    np.testing.assert_array_equal(by_index.values.as_matrix(), by_mask.values.as_matrix())
+
+
 def test_gnc_local_search_drops_a_false_loop_the_solution_bent_to_fit(shared_dataset, monkeypatch):
     """intel with 10% false loops (seed 5), from the file's values: the graduated stages and the
     consistency pass end with one false loop kept (the solution distorted to fit it); leaving it

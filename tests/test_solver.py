@@ -191,6 +191,17 @@ def test_robust_options_are_checked_before_any_work():
         ({"robust": "gnc:abc"}, r"width is a number \(as in gnc:2.5\), not 'abc'"),
         ({"robust": "huber:0"}, "width must be positive, not 0"),
         ({"robust": "cauchy", "robust_edges": "some"}, "robust edges are loops or all"),
+        (
+            {"robust": "gnc", "robust_edges": np.ones(graph.num_edges - 1, dtype=bool)},
+            rf"one entry per between edge \({graph.num_edges}\), not shape \({graph.num_edges - 1},\)",
+        ),
+        (
+            {"robust": "gnc", "robust_edges": [0, graph.num_edges]},
+            rf"index {graph.num_edges} is not one of the graph's between edges "
+            rf"\(0 to {graph.num_edges - 1}\)",
+        ),
+        ({"robust": "gnc", "robust_edges": [-1]}, "index -1 is not one of"),
+        ({"robust": "gnc", "robust_edges": [0.0, 1.0]}, "not an array of float64"),
     ]
     for keywords, message in cases:
         with pytest.raises(ValueError, match=message):
