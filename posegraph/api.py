@@ -192,9 +192,7 @@ def optimize(
     init_time = time.perf_counter() - start
 
     if kernel is None:
-        system, previous = _cached_system(graph, options)
-        result = solve(graph, options, callback, system=system, previous=previous)
-        graph.last_result = (_structure_key(graph, options), result)
+        result = _solve_warm(graph, options, callback)
         edge_weights, prior_weights = np.ones(graph.num_edges), np.ones(len(graph.priors))
     else:
         result, edge_weights, prior_weights = _robust_solve(
@@ -264,7 +262,10 @@ def _robust_solve(
         weights[rejected] = 0.0
     else:
         weighting = Robustifier(RobustKernel(kernel.name, kernel.widths[measured]), measured)
-        result = solve(work, options, callback, weighting=weighting)
+        if work is graph:
+            result = _solve_warm(graph, options, callback, weighting)
+        else:  # a new graph at every call
+            result = solve(work, options, callback, weighting=weighting)
         s = between_squares(result.values, work.edges)
         rejected = np.flatnonzero(measured & (s > kernel.widths**2))
         _, weights = weighting.cost_and_weights(s)
@@ -383,6 +384,20 @@ def _initialize_new_nodes(graph: PoseGraph, options: SolverOptions) -> None:
 
 def _structure_key(graph: PoseGraph, options: SolverOptions) -> tuple:
     return (graph.structure_version, options.linear_solver)
+
+
+def _solve_warm(
+    graph: PoseGraph,
+    options: SolverOptions,
+    callback: Callback | None,
+    weighting: Robustifier | None = None,
+) -> Result:
+    """``solve`` on the graph, reusing the last call's normal equations and linearisation where
+    they still hold (``_cached_system``), and keeping this call's for the next."""
+    system, previous = _cached_system(graph, options)
+    result = solve(graph, options, callback, system=system, weighting=weighting, previous=previous)
+    graph.last_result = (_structure_key(graph, options), result)
+    return result
 
 
 def _cached_system(graph: PoseGraph, options: SolverOptions):

@@ -208,8 +208,8 @@ class PoseGraph:
 
     # ------------------------------------------------------------------------ queries
     def current_system(self, linear_solver: str):
-        """The normal equations (``NormalEquations``) of the last least-squares
-        ``posegraph.optimize`` with ``linear_solver``, if the graph's structure has not changed
+        """The normal equations (``NormalEquations``) of the last ``posegraph.optimize`` solved
+        on this graph (least squares or an IRLS kernel) with ``linear_solver``, if the graph's structure has not changed
         since (their pattern and symbolic factorisation still hold); else None."""
         if self.last_result is None:
             return None

@@ -135,8 +135,8 @@ def optimize(
     structure, to reuse its pattern and symbolic factorisation. ``previous``, the result of
     an earlier call on this graph, warm-starts: its pattern is grown if the graph grew by
     appending, and its linearisation is reused where the graph's edges and values are
-    unchanged (least squares only). ``weighting`` makes the cost
-    robust (``posegraph.robust.Robustifier``: IRLS, its weights re-evaluated at every
+    unchanged (its residuals and Jacobians: the weights are taken anew). ``weighting`` makes
+    the cost robust (``posegraph.robust.Robustifier``: IRLS, its weights re-evaluated at every
     linearisation). The graph is not modified.
     """
     options = SolverOptions() if options is None else options
@@ -153,7 +153,7 @@ def optimize(
         reused = ["sparsity pattern", "symbolic factorization"]
 
     clock.lap("other")
-    last = None if previous is None or weighting is not None else previous.linearization
+    last = None if previous is None else previous.linearization
     current = _Linearized(graph, graph.values, weighting, last)
     if current.reused_edges:
         reused.append(f"linearization of {current.reused_edges} edges")
