@@ -549,14 +549,13 @@ def test_irls_calls_reuse_the_last_system_and_linearisation_as_least_squares_cal
     the weights are taken anew from the reused residuals, so it ends where a call that rebuilds
     everything (on a copy, which drops them) ends."""
     graph = random_graph(SE2, 40, 20, seed=83, noise=0.1)
-    first = posegraph.optimize(graph, robust="cauchy")
+    posegraph.optimize(graph, robust="cauchy")
     rebuilt = posegraph.optimize(graph.copy(), robust="cauchy")
     again = posegraph.optimize(graph, robust="cauchy")
     assert not any(r.startswith(("sparsity", "linearization")) for r in rebuilt.summary.reused)
     assert {"sparsity pattern", "symbolic factorization"} <= set(again.summary.reused)
     assert f"linearization of {graph.num_edges} edges" in again.summary.reused
     assert again.summary.final_error == pytest.approx(rebuilt.summary.final_error, rel=1e-12)
-    assert again.summary.final_error <= first.summary.final_error
     _drive_on(graph, 3)
     grown = posegraph.optimize(graph, robust="cauchy")
     assert "sparsity pattern (grown)" in grown.summary.reused
