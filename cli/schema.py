@@ -61,6 +61,8 @@ SUMMARY = {
         "robust": {"type": ["string", "null"]},
         "rejected_edges": {"type": "array", "items": {"type": "integer"}},
         "rejected_priors": {"type": "array", "items": {"type": "integer"}},
+        "edges_under_kernel": {"type": "integer", "minimum": 0},
+        "priors_under_kernel": {"type": "integer", "minimum": 0},
         "history": {
             "type": "array",
             "items": {

@@ -23,13 +23,24 @@ def format_summary(
         + ", ".join(f"{name} {seconds:.3f}" for name, seconds in phases.items()),
     ]
     if summary.robust:
-        lines.append(f"  robust          {summary.robust}: {_rejected(graph, summary)}")
+        lines.append(
+            f"  robust          {summary.robust} on {_covered(graph, summary)}: "
+            + _rejected(graph, summary)
+        )
     lines.extend(f"  {what:<15} {path}" for what, path in written.items() if path)
     return "\n".join(lines)
 
 
 SHOWN_REJECTED = 5
 """Rejected edges and priors named in the report; ``--json`` lists them all."""
+
+
+def _covered(graph: PoseGraph, summary: Summary) -> str:
+    """What the robust kernel covered: "245 of 644 edges", and " and 30 priors" if any."""
+    covered = f"{summary.edges_under_kernel} of {graph.num_edges} edges"
+    if summary.priors_under_kernel:
+        covered += f" and {summary.priors_under_kernel} priors"
+    return covered
 
 
 def _rejected(graph: PoseGraph, summary: Summary) -> str:

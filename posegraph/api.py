@@ -276,6 +276,8 @@ def _robust_solve(
     result.summary.robust = kernel.label
     result.summary.rejected_edges = rejected[rejected < count].tolist()
     result.summary.rejected_priors = (rejected[rejected >= count] - count).tolist()
+    result.summary.edges_under_kernel = int(measured[:count].sum())
+    result.summary.priors_under_kernel = int(measured[count:].sum())
     prior_weights = weights[count:] if anchored else np.ones(len(graph.priors))
     return result, weights[:count], prior_weights
 

@@ -18,6 +18,7 @@ from posegraph_datasets import example
 from posegraph_datasets.outliers import add_false_loops
 from posegraph_datasets.paths import BENCHMARK_GRAPHS
 
+from posegraph.api import robust_mask
 from posegraph.io import read_graph, write_graph
 
 from .conftest import city_with_fixes
@@ -240,11 +241,15 @@ def test_robust_priors_reject_false_fixes_read_from_a_file(tmp_path):
     robust = run_json("optimize", path, "--robust", "gnc", "--robust-priors")["summary"]
     assert robust["rejected_priors"] == np.flatnonzero(false).tolist()
     assert robust["rejected_edges"] == []
+    loops = int(robust_mask(graph, "loops").sum())
+    assert (robust["edges_under_kernel"], robust["priors_under_kernel"]) == (loops, false.size)
     loops_only = run_json("optimize", path, "--robust", "gnc")["summary"]
     assert loops_only["rejected_priors"] == []
+    assert (loops_only["edges_under_kernel"], loops_only["priors_under_kernel"]) == (loops, 0)
     text = run("optimize", path, "--robust", "gnc", "--robust-priors").stdout
     first = ", ".join(f"on {graph.node_ids[graph.priors.i[k]]}" for k in np.flatnonzero(false)[:5])
-    assert f"0 edge(s) rejected; {false.sum()} prior(s) rejected: {first}, …" in text
+    covered = f"on {loops} of {graph.num_edges} edges and {false.size} priors: "
+    assert f"{covered}0 edge(s) rejected; {false.sum()} prior(s) rejected: {first}, …" in text
 
 
 def test_robust_report_names_the_rejected_loops_by_their_nodes(tmp_path):

@@ -248,6 +248,8 @@ def test_robust_edges_given_by_the_caller_cover_a_closure_between_consecutive_no
     assert distance_to_clean(trusted.values) > 0.5
     by_mask = posegraph.optimize(graph.copy(), robust="gnc", robust_edges=closures)
     assert by_mask.summary.rejected_edges == [false_closure]
+    assert by_mask.summary.edges_under_kernel == closures.sum()
+    assert trusted.summary.edges_under_kernel == closures.sum() - 1  # all but the false closure
     assert distance_to_clean(by_mask.values) < 1e-6
     by_index = posegraph.optimize(graph.copy(), robust="gnc", robust_edges=np.flatnonzero(closures))
     assert by_index.summary.rejected_edges == [false_closure]

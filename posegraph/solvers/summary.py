@@ -53,6 +53,10 @@ class Summary:
     """Indices of the between edges rejected as outliers (robust runs only)."""
     rejected_priors: list[int] = dataclasses.field(default_factory=list)
     """Indices of the priors rejected as outliers (robust runs with ``robust_priors`` only)."""
+    edges_under_kernel: int = 0
+    """How many between edges the robust kernel covered (the ``robust_edges`` class)."""
+    priors_under_kernel: int = 0
+    """How many priors it covered (all with ``robust_priors``, else none)."""
 
     @property
     def initial_chi2(self) -> float:
@@ -88,6 +92,8 @@ class Summary:
             "robust": self.robust,
             "rejected_edges": list(self.rejected_edges),
             "rejected_priors": list(self.rejected_priors),
+            "edges_under_kernel": self.edges_under_kernel,
+            "priors_under_kernel": self.priors_under_kernel,
             "history": [dataclasses.asdict(r) for r in self.iterations],
         }
 
