@@ -4,15 +4,17 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import scipy.linalg
 
 from posegraph.lie import SE2, SE3, SO2, SO3, LieGroup, Sim3
+from posegraph.lie.base import integral_of_exp
 from posegraph.lie.so3 import project_to_rotation
 
 from .helpers import assert_same_element, numerical_jacobian
 
 # Either side of the coefficients' switch to series, at θ = 0.1 and 0.5, too.
 ANGLES = [0.0, 1e-8, 1e-4, 0.099, 0.101, 0.499, 0.501, np.pi - 1e-6, np.pi]
-LOG_SCALES = [0.0, 1e-8, -1e-8, 3.0, -3.0]
+LOG_SCALES = [0.0, 1e-8, -1e-8, 3.0, -3.0, 9.0, -9.0]  # |σ| ≥ 8: Sim3's moments by recurrence
 AXIS = np.array([0.48, -0.6, 0.64])  # unit length
 
 
@@ -38,8 +40,11 @@ IDS = [f"{g.__name__}-theta={a:g}-sigma={s:g}" for g, a, s in CASES]
 def test_exp_log_at_hard_angles(group, angle, log_scale):
     tangent = _tangent(group, angle, log_scale)
     x = group.exp(tangent)
+    np.testing.assert_allclose(
+        x.as_matrix(), scipy.linalg.expm(group.hat(tangent)), rtol=1e-10, atol=1e-12
+    )
     recovered = x.log()
-    assert_same_element(group.exp(recovered), x, atol=1e-12)
+    assert_same_element(group.exp(recovered), x, atol=1e-12 * np.exp(abs(log_scale)))
     if angle < np.pi:
         np.testing.assert_allclose(recovered, tangent, rtol=1e-9, atol=1e-12)
     else:  # At θ = π, +φ and −φ are the same rotation; the rest of ξ is recovered either way.
@@ -178,3 +183,18 @@ def test_sim3_from_general_homogeneous_matrix():
     s = Sim3.sample(np.random.default_rng(7))
     eade = s.as_matrix() / s.scale
     assert_same_element(Sim3.from_matrix(eade), s, atol=1e-13)
+
+
+def test_integral_of_exp_matches_van_loans_block_exponential():
+    """φ₁(A) = ∫₀¹ exp(sA) ds, scaled per matrix in one batch (‖A‖₁ from 0 to ≈ 400), against
+    the upper-right block of expm([[A, I], [0, 0]]) (Van Loan 1978) through scipy."""
+    rng = np.random.default_rng(11)
+    a = rng.normal(size=(6, 5, 5)) * np.array([0.0, 1e-9, 0.1, 1.0, 10.0, 80.0])[:, None, None]
+    block = np.zeros((6, 10, 10))
+    block[:, :5, :5], block[:, :5, 5:] = a, np.eye(5)
+    reference = scipy.linalg.expm(block)[:, :5, 5:]
+    scale = np.abs(reference).max(axis=(1, 2), keepdims=True)
+    np.testing.assert_allclose(integral_of_exp(a) / scale, reference / scale, rtol=0, atol=1e-11)
+    np.testing.assert_array_equal(integral_of_exp(np.zeros((3, 3))), np.eye(3))
+    with np.errstate(invalid="ignore"):  # inf · 0 in the products
+        assert not np.isfinite(integral_of_exp(np.full((2, 2), np.inf))).any()

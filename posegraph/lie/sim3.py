@@ -35,23 +35,52 @@ _SIGMA_SERIES_BELOW = 8.0
 _SIGMA_TERMS = 51  # 8^51 / 51! < 1e-20
 
 
-def _moment(sigma: np.ndarray, k: int) -> np.ndarray:
-    """m_k(σ) = ∫₀¹ e^{σu} u^k du, for k ≥ 1.
+_MOMENTS = 2 * _THETA_TERMS
+_TOP_MOMENT_SERIES = np.array(
+    [1.0 / (factorial(n) * (n + _MOMENTS + 1)) for n in range(_SIGMA_TERMS)]
+)
+"""Coefficient of σⁿ in the series of m_K(σ), K = ``_MOMENTS``."""
+_MOMENT_WEIGHTS = [(-1.0) ** ((k - 1) // 2) / factorial(k) for k in range(_MOMENTS + 1)]
+"""(−1)ʲ/k! for k = 2j+1 and k = 2j+2: the weight of θ²ʲ m_k in b (k odd) and in c (k even)."""
 
-    Series Σ_n σⁿ / (n! (n + k + 1)) for |σ| < 8; above, the upward recurrence
-    m_k = (e^σ − k m_{k−1}) / σ, which is stable there for the k used here (k ≤ 18).
+
+def _small_angle_coefficients(sigma: np.ndarray, theta: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(b, c) for θ < 0.5 from their series b = Σⱼ (−1)ʲ θ²ʲ m_{2j+1}(σ)/(2j+1)! and
+    c = Σⱼ (−1)ʲ θ²ʲ m_{2j+2}(σ)/(2j+2)!, j < ``_THETA_TERMS``, in the moments
+    m_k(σ) = ∫₀¹ e^{σu} u^k du, which satisfy σ m_k = e^σ − k m_{k−1}.
+
+    For |σ| < 8 the moments run downward from the series of the top one,
+    m_K = Σₙ σⁿ / (n! (n + K + 1)): an error in m_k shrinks by |σ|/k at each step down. Above,
+    they run upward from m_0 = (e^σ − 1)/σ, which is stable there.
     """
-    series = np.zeros_like(sigma)
-    for n in reversed(range(_SIGMA_TERMS)):
-        series = series * sigma + 1.0 / (factorial(n) * (n + k + 1))
-    large = np.abs(sigma) >= _SIGMA_SERIES_BELOW
-    if not np.any(large):
-        return series
-    s = np.where(large, sigma, _SIGMA_SERIES_BELOW)
-    recurrence = np.expm1(s) / s
-    for j in range(1, k + 1):
-        recurrence = (np.exp(s) - j * recurrence) / s
-    return np.where(large, recurrence, series)
+    t2 = theta * theta
+    below = np.abs(sigma) < _SIGMA_SERIES_BELOW
+    s = np.where(below, sigma, 0.0)
+    e = np.exp(s)
+    moment = np.zeros_like(s)
+    for coefficient in _TOP_MOMENT_SERIES[::-1]:
+        moment = moment * s + coefficient
+    b, c = np.zeros_like(s), np.zeros_like(s)
+    for k in range(_MOMENTS, 0, -1):  # Horner in θ², from the highest power down
+        if k % 2:
+            b = b * t2 + _MOMENT_WEIGHTS[k] * moment
+        else:
+            c = c * t2 + _MOMENT_WEIGHTS[k] * moment
+        moment = (e - s * moment) / k
+    if below.all():
+        return b, c
+    s = np.where(below, _SIGMA_SERIES_BELOW, sigma)
+    e = np.exp(s)
+    moment, power = np.expm1(s) / s, np.ones_like(s)
+    b_up, c_up = np.zeros_like(s), np.zeros_like(s)
+    for k in range(1, _MOMENTS + 1):
+        moment = (e - k * moment) / s
+        if k % 2:
+            b_up += _MOMENT_WEIGHTS[k] * power * moment
+        else:
+            c_up += _MOMENT_WEIGHTS[k] * power * moment
+            power = power * t2
+    return np.where(below, b, b_up), np.where(below, c, c_up)
 
 
 def w_coefficients(sigma: np.ndarray, theta: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -63,14 +92,7 @@ def w_coefficients(sigma: np.ndarray, theta: np.ndarray) -> tuple[np.ndarray, ..
     b = np.empty_like(theta)
     c = np.empty_like(theta)
     if np.any(small):
-        s, t2 = sigma[small], theta[small] ** 2
-        b_s, c_s, power = np.zeros_like(s), np.zeros_like(s), np.ones_like(s)
-        for j in range(_THETA_TERMS):
-            sign = (-1.0) ** j
-            b_s += sign * power * _moment(s, 2 * j + 1) / factorial(2 * j + 1)
-            c_s += sign * power * _moment(s, 2 * j + 2) / factorial(2 * j + 2)
-            power = power * t2
-        b[small], c[small] = b_s, c_s
+        b[small], c[small] = _small_angle_coefficients(sigma[small], theta[small])
     large = ~small
     if np.any(large):
         s, t, a_l = sigma[large], theta[large], a[large]
