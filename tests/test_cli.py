@@ -267,6 +267,27 @@ def test_robust_report_names_the_rejected_loops_by_their_nodes(tmp_path):
     assert f"{len(rejected)} edge(s) rejected: {first}, … (--json lists all)" in text
 
 
+def test_robust_report_says_when_most_loops_were_rejected(tmp_path):
+    """Where every edge's information overstates its accuracy 1000-fold, the loops all fail
+    GNC's gate against the trusted odometry: the report then says that most were rejected and
+    what to check. With the file's information, where only the false loops go, it does not."""
+    graph, _ = city_with_fixes(0.0, seed=0)
+    corrupted, _ = add_false_loops(graph, 0.1, seed=0)
+    path = tmp_path / "loops.g2o"
+    write_graph(corrupted, str(path))
+    assert (
+        "most of the edges under the kernel" not in run("optimize", path, "--robust", "gnc").stdout
+    )
+    loops = robust_mask(corrupted, "loops")
+    corrupted.edges.information[:] *= 1e3
+    write_graph(corrupted, str(path))
+    text = run("optimize", path, "--robust", "gnc").stdout
+    rejected = run_json("optimize", path, "--robust", "gnc")["summary"]["rejected_edges"]
+    assert 2 * len(rejected) > loops.sum()
+    assert "most of the edges under the kernel were rejected" in text
+    assert "widen the kernel (--robust gnc:WIDTH)" in text
+
+
 def test_a_closed_output_pipe_ends_quietly():
     """`posegraph info g.g2o | head -1`: no error line, no traceback, exit 1 (interrupted)."""
     read_end, write_end = os.pipe()
