@@ -99,6 +99,8 @@ def correct_scale_drift(
     convention: str = "world_from_camera",
     options: SolverOptions | None = None,
     init: str = "auto",
+    robust: str | None = None,
+    robust_edges: str | np.ndarray = "loops",
 ) -> ScaleDriftCorrection:
     """Correct the scale drift of a graph: an SE3 graph is lifted first (then it needs
     Sim3 loop closures added to gain anything); a Sim3 graph, such as a g2o file of SE3
@@ -106,7 +108,9 @@ def correct_scale_drift(
 
     ``convention`` names how the returned ``poses`` are expressed. ``init`` is the initialisation
     (default "auto": chordal relaxation of rotations, log-scales and translations when the graph
-    has loops, which copes with drift that dead reckoning cannot start from).
+    has loops, which copes with drift that dead reckoning cannot start from). ``robust`` and
+    ``robust_edges`` are ``optimize``'s: with ``robust="gnc"``, loop closures from place
+    recognition that matched the wrong place are rejected (``result.summary.rejected_edges``).
     """
     _check_convention(convention)
     sim3 = lift_graph(graph, scale_information) if graph.group is SE3 else graph.copy()
@@ -114,7 +118,8 @@ def correct_scale_drift(
         raise ValueError(
             f"scale-drift correction needs an SE3 or Sim3 graph, not {graph.group.__name__}"
         )
-    result = optimize(sim3, init=init, options=options)  # leaves the solution in ``sim3``
+    # ``optimize`` leaves the solution in ``sim3``.
+    result = optimize(sim3, init=init, options=options, robust=robust, robust_edges=robust_edges)
     return ScaleDriftCorrection(
         poses=sim3_to_se3(result.values, convention),
         scales=np.asarray(result.values.scale).copy(),

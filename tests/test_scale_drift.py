@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from posegraph_datasets.monocular import monocular_sequence, write_sequence
+from posegraph_datasets.outliers import add_false_loops
 
 import posegraph
 from posegraph.alignment import umeyama
@@ -128,3 +129,19 @@ def test_mixed_g2o_files_read_as_one_sim3_graph(tmp_path, dialect):
             again.edges.measurements.as_matrix(), graph.edges.measurements.as_matrix(), atol=1e-10
         )
         np.testing.assert_allclose(again.edges.information, graph.edges.information, rtol=1e-12)
+
+
+def test_gnc_rejects_false_sim3_loops_of_a_monocular_sequence():
+    """Place recognition that matched the wrong place: with 30% false Sim3 loop closures
+    (seed 1), least squares ends far off, and ``robust="gnc"`` rejects exactly the false loops
+    and ends where the correction of the graph without them ends."""
+    sequence = monocular_sequence(drift=0.01, seed=0)
+    graph = sequence.sim3_graph()
+    clean = correct_scale_drift(graph)
+    corrupted, false = add_false_loops(graph, 0.3, seed=1)
+    robust = correct_scale_drift(corrupted, robust="gnc")
+    assert robust.result.summary.rejected_edges == np.flatnonzero(false).tolist()
+    np.testing.assert_allclose(robust.poses.translation, clean.poses.translation, atol=1e-6)
+    np.testing.assert_allclose(robust.scales, clean.scales, rtol=1e-6)
+    plain = correct_scale_drift(corrupted)
+    assert sequence.ate(plain.poses) > 10 * sequence.ate(clean.poses)
