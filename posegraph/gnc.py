@@ -16,7 +16,8 @@ consistency pass and a local search.
 4. Local search, in rounds (up to ``LOCAL_SEARCH_ROUNDS``) while a round changes the kept set:
    - re-admit: the rejected loops whose innovation χ² against the solution is below c²
      (``posegraph.leverage.innovations``) and that the other re-admitted loops explain are
-     added back together, and the kept set is settled as in step 3 (warm-started). A region
+     added back together, and the kept set is settled as in step 3, both warm-started and
+     from the chordal relaxation of the kept set (the lower objective is kept). A region
      that drifted while its true loops were rejected fits them badly (large s) but predicts the
      misfit (small innovation), and they pull the region back for each other;
    - drop: for the kept loops with the largest deleted residuals d² (``posegraph.leverage``:
@@ -275,6 +276,20 @@ def _settle(graph, mask, kept, values, width_sq, options, run: _Run, restart: bo
     return kept, result
 
 
+def _settle_best(graph, mask, kept, values, width_sq, options, run: _Run):
+    """``_settle`` from ``values`` and (SE2, SE3, Sim3) from the chordal relaxation of the kept
+    edges; the lower TLS objective wins. Returns (kept, result, its TLS objective). Loops
+    re-admitted together can pull a region out of the basin that the values lie in (a
+    monocular sequence with 20 loops back: 16 m ATE from the values, 1.6 m from chordal)."""
+    best = None
+    for restart in (False, True) if supports_chordal(graph.group) else (False,):
+        settled_kept, settled = _settle(graph, mask, kept, values, width_sq, options, run, restart)
+        objective = tls_objective(graph, settled.values, mask, width_sq)
+        if best is None or objective < best[2]:
+            best = settled_kept, settled, objective
+    return best
+
+
 def _readmit(graph, mask, kept, result, objective, width_sq, options, leverage, run: _Run):
     """Re-admit the rejected loops that the other re-admitted loops make consistent, and settle.
 
@@ -312,11 +327,7 @@ def _readmit(graph, mask, kept, result, objective, width_sq, options, leverage, 
             squares <= (1.0 - EXPLAINED) * misfit[candidates]
         )
         if explained.all():
-            kept, settled = _settle(
-                graph, mask, with_candidates, values, width_sq, options, run, restart=False
-            )
-            settled_objective = tls_objective(graph, settled.values, mask, width_sq)
-            return kept, settled, settled_objective
+            return _settle_best(graph, mask, with_candidates, values, width_sq, options, run)
         candidates = candidates[explained]
     return kept, None, objective
 

@@ -145,3 +145,18 @@ def test_gnc_rejects_false_sim3_loops_of_a_monocular_sequence():
     np.testing.assert_allclose(robust.scales, clean.scales, rtol=1e-6)
     plain = correct_scale_drift(corrupted)
     assert sequence.ate(plain.poses) > 10 * sequence.ate(clean.poses)
+
+
+def test_gnc_settles_readmitted_loops_from_the_chordal_relaxation_too():
+    """2% scale drift per keyframe (scale information 100) and 30% false Sim3 loops (seed 1):
+    GNC's stages reject every loop, and re-admission brings the 20 true ones back together.
+    Settled from the values the stages left, they end in another basin (least-squares cost
+    104.7, ATE 16 m); from the chordal relaxation of the kept edges, at the correction without
+    the false loops (99.1, ATE 1.6 m)."""
+    sequence = monocular_sequence(drift=0.02, seed=1)
+    graph = sequence.sim3_graph(scale_information=100.0)
+    clean = correct_scale_drift(graph)
+    corrupted, false = add_false_loops(graph, 0.3, seed=1)
+    robust = correct_scale_drift(corrupted, robust="gnc")
+    assert robust.result.summary.rejected_edges == np.flatnonzero(false).tolist()
+    np.testing.assert_allclose(robust.poses.translation, clean.poses.translation, atol=1e-6)
