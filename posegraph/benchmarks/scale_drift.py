@@ -14,8 +14,9 @@ of false and true loops that GNC rejected.
 from __future__ import annotations
 
 import argparse
+from collections.abc import Iterator
 
-from posegraph_datasets.monocular import monocular_sequence
+from posegraph_datasets.monocular import MonocularSequence, monocular_sequence
 from posegraph_datasets.outliers import add_false_loops, rejection_rates
 
 from ..api import optimize
@@ -33,57 +34,61 @@ def run(
         "drift / keyframe | seed | ATE uncorrected | ATE SE3 PGO | ATE Sim3 | uncorrected / Sim3 "
         "| SE3 / Sim3 | time (s)"
     )
-    for drift in drifts:
-        for seed in seeds:
-            sequence = monocular_sequence(drift=drift, seed=seed)
-            corrected = correct_scale_drift(sequence.sim3_graph(scale_information))
-            se3 = optimize(sequence.se3_graph())
-            before = sequence.ate(sequence.odometry.values)
-            after, se3_ate = sequence.ate(corrected.poses), sequence.ate(se3.values)
-            table.add(
-                f"{drift:.1%} | {seed} | {before:.4g} | {se3_ate:.4g} | {after:.4g} | {before / after:.0f}× "
-                f"| {se3_ate / after:.1f}× | {corrected.result.summary.total_time:.3f}"
-            )
-            if plot and (drift, seed) == (drifts[0], seeds[0]):
-                from ..plotting import plot_trajectories
+    for drift, seed, sequence in _sequences(drifts, seeds):
+        corrected = correct_scale_drift(sequence.sim3_graph(scale_information))
+        se3 = optimize(sequence.se3_graph())
+        before = sequence.ate(sequence.odometry.values)
+        after, se3_ate = sequence.ate(corrected.poses), sequence.ate(se3.values)
+        table.add(
+            f"{drift:.1%} | {seed} | {before:.4g} | {se3_ate:.4g} | {after:.4g} | {before / after:.0f}× "
+            f"| {se3_ate / after:.1f}× | {corrected.result.summary.total_time:.3f}"
+        )
+        if plot and (drift, seed) == (drifts[0], seeds[0]):
+            from ..plotting import plot_trajectories
 
-                curves = [
-                    ("uncorrected", sequence.odometry.values.translation),
-                    ("SE3 PGO", se3.values.translation),
-                    ("Sim3 corrected", corrected.poses.translation),
-                    ("ground truth", sequence.truth.translation),
-                ]
-                plot_trajectories(
-                    curves, plot, title=f"drift {drift:.1%}/keyframe, seed {seed}", view="top"
-                )
+            curves = [
+                ("uncorrected", sequence.odometry.values.translation),
+                ("SE3 PGO", se3.values.translation),
+                ("Sim3 corrected", corrected.poses.translation),
+                ("ground truth", sequence.truth.translation),
+            ]
+            plot_trajectories(
+                curves, plot, title=f"drift {drift:.1%}/keyframe, seed {seed}", view="top"
+            )
     return str(table)
 
 
 def run_false_loops(
     drifts: list[float], seeds: list[int], fraction: float, scale_information: float | None = None
 ) -> str:
+    """The table of ``--false-loops`` (module docstring)."""
     table = MarkdownTable(
         "drift / keyframe | seed | false loops | ATE without them | ATE least squares "
         "| ATE gnc | false rejected | true wrongly rejected | gnc time (s)"
     )
+    for drift, seed, sequence in _sequences(drifts, seeds):
+        graph = sequence.sim3_graph(scale_information)
+        corrupted, false = add_false_loops(graph, fraction, seed)
+        clean = correct_scale_drift(graph)
+        plain = correct_scale_drift(corrupted)
+        robust = correct_scale_drift(corrupted, robust="gnc")
+        summary = robust.result.summary
+        false_rejected, true_rejected = rejection_rates(corrupted, false, summary.rejected_edges)
+        table.add(
+            f"{drift:.1%} | {seed} | {false.sum()} | {sequence.ate(clean.poses):.4g} "
+            f"| {sequence.ate(plain.poses):.4g} | {sequence.ate(robust.poses):.4g} "
+            f"| {false_rejected:.1%} | {true_rejected:.1%} | {summary.total_time:.2f}"
+        )
+    return str(table)
+
+
+def _sequences(
+    drifts: list[float], seeds: list[int]
+) -> Iterator[tuple[float, int, MonocularSequence]]:
+    """(drift, seed, the generated monocular sequence) for every drift and seed."""
     for drift in drifts:
         for seed in seeds:
-            sequence = monocular_sequence(drift=drift, seed=seed)
-            graph = sequence.sim3_graph(scale_information)
-            corrupted, false = add_false_loops(graph, fraction, seed)
-            clean = correct_scale_drift(graph)
-            plain = correct_scale_drift(corrupted)
-            robust = correct_scale_drift(corrupted, robust="gnc")
-            summary = robust.result.summary
-            false_rejected, true_rejected = rejection_rates(
-                corrupted, false, summary.rejected_edges
-            )
-            table.add(
-                f"{drift:.1%} | {seed} | {false.sum()} | {sequence.ate(clean.poses):.4g} "
-                f"| {sequence.ate(plain.poses):.4g} | {sequence.ate(robust.poses):.4g} "
-                f"| {false_rejected:.1%} | {true_rejected:.1%} | {summary.total_time:.2f}"
-            )
-    return str(table)
+            yield drift, seed, monocular_sequence(drift=drift, seed=seed)
 
 
 def main() -> None:
