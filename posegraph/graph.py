@@ -209,8 +209,9 @@ class PoseGraph:
     # ------------------------------------------------------------------------ queries
     def current_system(self, linear_solver: str):
         """The normal equations (``NormalEquations``) of the last ``posegraph.optimize`` solved
-        on this graph (least squares or an IRLS kernel) with ``linear_solver``, if the graph's structure has not changed
-        since (their pattern and symbolic factorisation still hold); else None."""
+        on this graph (least squares or an IRLS kernel) with ``linear_solver``, if the graph's
+        structure has not changed since (their pattern and symbolic factorisation still hold);
+        else None."""
         if self.last_result is None:
             return None
         key, result = self.last_result
