@@ -142,6 +142,7 @@ SCHEMAS = {
             "tag_counts",
             "nodes",
             "edges",
+            "loop_closures",
             "priors",
             "components",
             "gauge",
@@ -158,6 +159,7 @@ SCHEMAS = {
             "components": {"type": "array", "items": {"type": "integer"}},
             "condition_numbers": {"type": "object", "additionalProperties": _NUMBER},
             "singular_information": {"type": "integer", "minimum": 0},
+            "loop_closures": {"type": "integer", "minimum": 0},
             "problems": {
                 "type": "array",
                 "items": {

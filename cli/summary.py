@@ -95,7 +95,8 @@ def format_diagnosis(d: Diagnosis) -> str:
     lines = [
         f"{d.path} ({d.file_format}): {d.group} pose graph",
         f"  lines           {counts}",
-        f"  graph           {d.nodes} nodes, {d.edges} edges, {d.priors} priors",
+        f"  graph           {d.nodes} nodes, {d.edges} edges ({d.loop_closures} loop closures"
+        f" between nodes that are not consecutive), {d.priors} priors",
         f"  components      {len(d.components)} (sizes {', '.join(map(str, d.components[:5]))})",
         f"  gauge           {d.gauge}",
     ]

@@ -36,6 +36,8 @@ class Diagnosis:
     tag_counts: dict[str, int]
     nodes: int
     edges: int
+    loop_closures: int
+    """Edges between nodes that are not consecutive: what robust mode's "loops" class covers."""
     priors: int
     components: list[int]
     """Node count of every connected component, largest first."""
@@ -178,6 +180,7 @@ def diagnose(read: ReadResult) -> Diagnosis:
         tag_counts=dict(read.tag_counts),
         nodes=graph.num_nodes,
         edges=graph.num_edges,
+        loop_closures=int(np.count_nonzero(~consecutive)),
         priors=len(graph.priors),
         components=sizes,
         gauge=gauge,

@@ -335,6 +335,12 @@ def test_info_reports_problems_with_suggestions(tmp_path):
     document = run_json("info", EXAMPLE_2D)
     assert document["nodes"] == 400 and document["components"] == [400]
     assert document["problems"] == []
+    ends = np.array(
+        [line.split()[1:3] for line in open(EXAMPLE_2D) if line.startswith("EDGE_SE2")], dtype=int
+    )
+    loop_closures = int((np.abs(ends[:, 1] - ends[:, 0]) != 1).sum())  # ids are 0 … 399, in order
+    assert document["loop_closures"] == loop_closures > 0
+    assert f"({loop_closures} loop closures between" in run("info", EXAMPLE_2D).stdout
     broken = tmp_path / "two_parts.g2o"
     lines = [
         line
