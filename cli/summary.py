@@ -28,15 +28,16 @@ def format_summary(
             + _rejected(graph, summary)
         )
         if 2 * len(summary.rejected_edges) > summary.edges_under_kernel:
-            lines.append(MOST_REJECTED.format(kernel=summary.robust.partition(":")[0]))
+            hint = MOST_REJECTED.format(kernel=summary.robust.partition(":")[0])
+            lines.append(f"  {'':<15} {hint}")
     lines.extend(f"  {what:<15} {path}" for what, path in written.items() if path)
     return "\n".join(lines)
 
 
 MOST_REJECTED = (
-    "                  most of the edges under the kernel were rejected: if they are true, their"
-    " information (or the trusted edges') overstates their accuracy; check it, or widen the"
-    " kernel (--robust {kernel}:WIDTH)"
+    "most of the edges under the kernel were rejected: if they are true, their information (or"
+    " the trusted edges') overstates their accuracy; check it, or widen the kernel"
+    " (--robust {kernel}:WIDTH)"
 )
 """The report's hint when a robust run rejected more than half of the edges it covered."""
 
