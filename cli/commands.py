@@ -15,12 +15,13 @@ from posegraph.conversion import convert as convert_graph
 from posegraph.conversion import load_trajectory, output_format
 from posegraph.doctor import diagnose
 from posegraph.evaluation import evaluate
-from posegraph.io import ReadOptions, read_graph
+from posegraph.io import ReadOptions, ReadResult, read_graph
 from posegraph.io.covariances import write_covariances
 from posegraph.solvers import SolverOptions
 from posegraph.sparse_cholesky import NotPositiveDefinite
+from posegraph.trajectory_io import Trajectory
 
-from .errors import EXIT_NOT_CONVERGED, EXIT_OK, UsageError
+from .errors import EXIT_NOT_CONVERGED, EXIT_OK, UsageError, warn
 from .progress import Progress
 from .summary import format_diagnosis, format_evaluation, format_summary
 
@@ -33,6 +34,30 @@ def _options(args: argparse.Namespace) -> ReadOptions:
         edge2_order=args.edge2_order,
         scale_information=getattr(args, "scale_information", None),
     )
+
+
+class _Inputs:
+    """A command's input files, read with its options. What lenient reading skipped is kept for
+    the JSON document (``skipped_lines``) and, with ``warn`` in text mode, reported on stderr
+    as soon as it is read: the results leave those lines out."""
+
+    def __init__(self, args: argparse.Namespace, warn: bool = True) -> None:
+        self.options = _options(args)
+        self.warn = warn and not (args.json or args.quiet)
+        self.skipped_lines: list[dict] = []
+
+    def graph(self, path: str) -> ReadResult:
+        read = read_graph(path, self.options)
+        self.skipped_lines += [
+            {"path": path, "reason": why, "count": count, "first_line": line}
+            for why, count, line in read.skipped_by_reason()
+        ]
+        if read.skipped and self.warn:
+            warn(f"{path}: {read.skipped_report()}; the results leave them out")
+        return read
+
+    def trajectory(self, path: str) -> Trajectory:
+        return load_trajectory(path, self.graph)
 
 
 def _json_safe(value):
@@ -87,7 +112,8 @@ def optimize(args: argparse.Namespace) -> int:
     _check_output(args.output)
     _check_output(args.plot, figure=True)
     _check_output(args.covariances, text=True)
-    read = read_graph(args.input, _options(args))
+    inputs = _Inputs(args)
+    read = inputs.graph(args.input)
     graph = read.graph
     if args.fix:
         try:
@@ -147,6 +173,7 @@ def optimize(args: argparse.Namespace) -> int:
         "nodes": graph.num_nodes,
         "edges": graph.num_edges,
         "summary": summary.as_dict(),
+        "skipped_lines": inputs.skipped_lines,
     }
     written = {"wrote": args.output, "plotted": args.plot, "covariances": args.covariances}
     _emit(args, record, format_summary(args.input, graph, summary, written))
@@ -164,8 +191,10 @@ def _covariances(source: str, graph: posegraph.PoseGraph) -> np.ndarray:
 
 
 def info(args: argparse.Namespace) -> int:
-    diagnosis = diagnose(read_graph(args.input, _options(args)))
-    _emit(args, {"command": "info", **diagnosis.as_dict()}, format_diagnosis(diagnosis))
+    inputs = _Inputs(args, warn=False)  # the report lists the skipped lines as a problem
+    diagnosis = diagnose(inputs.graph(args.input))
+    record = {"command": "info", **diagnosis.as_dict(), "skipped_lines": inputs.skipped_lines}
+    _emit(args, record, format_diagnosis(diagnosis))
     return EXIT_OK
 
 
@@ -175,7 +204,8 @@ def convert(args: argparse.Namespace) -> int:
         _check_output(args.output, args.to)
     except ValueError as error:
         raise UsageError(f"{error}; say --to g2o|toro|tum|kitti") from None
-    graph = read_graph(args.input, _options(args)).graph
+    inputs = _Inputs(args)
+    graph = inputs.graph(args.input).graph
     written = convert_graph(
         graph, args.output, args.to, args.sim3_dialect, args.g2o_rotation_information
     )
@@ -186,6 +216,7 @@ def convert(args: argparse.Namespace) -> int:
         "format": written,
         "nodes": graph.num_nodes,
         "edges": graph.num_edges,
+        "skipped_lines": inputs.skipped_lines,
     }
     _emit(args, record, f"wrote {args.output} ({written}, {graph.num_nodes} poses)")
     return EXIT_OK
@@ -195,17 +226,24 @@ def plot(args: argparse.Namespace) -> int:
     from posegraph.plotting import plot_graphs
 
     _check_output(args.output, figure=True)
-    graphs = [(os.path.basename(p), read_graph(p, _options(args)).graph) for p in args.inputs]
+    inputs = _Inputs(args)
+    graphs = [(os.path.basename(p), inputs.graph(p).graph) for p in args.inputs]
     plot_graphs(graphs, args.output, title=args.title, view=args.view)
-    record = {"command": "plot", "inputs": args.inputs, "output": args.output}
+    record = {
+        "command": "plot",
+        "inputs": args.inputs,
+        "output": args.output,
+        "skipped_lines": inputs.skipped_lines,
+    }
     _emit(args, record, f"wrote {args.output}")
     return EXIT_OK
 
 
 def eval(args: argparse.Namespace) -> int:  # noqa: A001 - the subcommand's name
     _check_output(args.plot, figure=True)
-    estimate = load_trajectory(args.estimate, _options(args))
-    truth = load_trajectory(args.ground_truth, _options(args))
+    inputs = _Inputs(args)
+    estimate = inputs.trajectory(args.estimate)
+    truth = inputs.trajectory(args.ground_truth)
     evaluation = evaluate(estimate, truth, args.align, args.delta, args.max_time_difference)
     if args.plot:
         from posegraph.plotting import plot_trajectories
@@ -224,6 +262,7 @@ def eval(args: argparse.Namespace) -> int:  # noqa: A001 - the subcommand's name
         "ground_truth": args.ground_truth,
         "plot": args.plot,
         **evaluation.as_dict(),
+        "skipped_lines": inputs.skipped_lines,
     }
     _emit(args, record, format_evaluation(evaluation))
     return EXIT_OK
@@ -231,12 +270,13 @@ def eval(args: argparse.Namespace) -> int:  # noqa: A001 - the subcommand's name
 
 def scale_drift(args: argparse.Namespace) -> int:
     from posegraph.scale_drift import correct_scale_drift
-    from posegraph.trajectory_io import Trajectory, as_se3, write_trajectory
+    from posegraph.trajectory_io import as_se3, write_trajectory
 
     _refuse_to_overwrite(args.input, args.output, args.overwrite)
     _check_output(args.output)
     _check_output(args.plot, figure=True)
-    graph = read_graph(args.input, _options(args)).graph
+    inputs = _Inputs(args)
+    graph = inputs.graph(args.input).graph
     before = Trajectory(graph.node_ids.astype(float), as_se3(graph.values))
     correction = correct_scale_drift(graph, args.scale_information, args.convention)
     keys = correction.node_ids.astype(float)
@@ -272,7 +312,7 @@ def scale_drift(args: argparse.Namespace) -> int:
         ("corrected", corrected.positions),
     ]
     if args.gt:
-        truth = load_trajectory(args.gt, _options(args))
+        truth = inputs.trajectory(args.gt)
         ate_before = evaluate(before, truth, "se3").ate.rmse
         ate_after = evaluate(corrected, truth, "se3").ate.rmse
         record["ate_before"], record["ate_after"] = ate_before, ate_after
@@ -288,6 +328,7 @@ def scale_drift(args: argparse.Namespace) -> int:
         title = f"scale-drift correction: {os.path.basename(args.input)} (top view)"
         plot_trajectories(curves, args.plot, title=title, view="top")
         lines.append(f"  plotted         {args.plot}")
+    record["skipped_lines"] = inputs.skipped_lines
     _emit(args, record, "\n".join(lines))
     return EXIT_OK if correction.result.summary.converged else EXIT_NOT_CONVERGED
 

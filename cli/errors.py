@@ -15,3 +15,8 @@ class UsageError(Exception):
 
 def report(message: str) -> None:
     print(f"posegraph: error: {message}", file=sys.stderr)
+
+
+def warn(message: str) -> None:
+    """A finding that does not stop the command, as one line on stderr."""
+    print(f"posegraph: warning: {message}", file=sys.stderr)

@@ -16,6 +16,20 @@ _STATS = {
     },
 }
 _PATH_OR_NULL = {"type": ["string", "null"]}
+_SKIPPED_LINES = {
+    "type": "array",
+    "items": {
+        "type": "object",
+        "required": ["path", "reason", "count", "first_line"],
+        "properties": {
+            "path": {"type": "string"},
+            "reason": {"type": "string"},
+            "count": {"type": "integer", "minimum": 1},
+            "first_line": {"type": "integer", "minimum": 1},
+        },
+    },
+}
+"""What ``--lenient`` reading skipped, by file and reason, most frequent first; empty if nothing."""
 
 SUMMARY = {
     "type": "object",
@@ -97,9 +111,11 @@ SCHEMAS = {
             "summary",
             "ate_before",
             "ate_after",
+            "skipped_lines",
         ],
         "properties": {
             "command": {"const": "scale-drift"},
+            "skipped_lines": _SKIPPED_LINES,
             "convention": {"enum": ["world_from_camera", "camera_from_world"]},
             "scale_range": {"type": "array", "items": _NUMBER, "minItems": 2, "maxItems": 2},
             "summary": SUMMARY,
@@ -119,9 +135,11 @@ SCHEMAS = {
             "nodes",
             "edges",
             "summary",
+            "skipped_lines",
         ],
         "properties": {
             "command": {"const": "optimize"},
+            "skipped_lines": _SKIPPED_LINES,
             "input": {"type": "string"},
             "output": _PATH_OR_NULL,
             "plot": _PATH_OR_NULL,
@@ -151,9 +169,11 @@ SCHEMAS = {
             "initial_error",
             "initial_chi2",
             "problems",
+            "skipped_lines",
         ],
         "properties": {
             "command": {"const": "info"},
+            "skipped_lines": _SKIPPED_LINES,
             "file_format": {"enum": ["g2o", "toro"]},
             "tag_counts": {"type": "object", "additionalProperties": {"type": "integer"}},
             "components": {"type": "array", "items": {"type": "integer"}},
@@ -172,17 +192,19 @@ SCHEMAS = {
     },
     "convert": {
         "type": "object",
-        "required": ["command", "input", "output", "format", "nodes", "edges"],
+        "required": ["command", "input", "output", "format", "nodes", "edges", "skipped_lines"],
         "properties": {
             "command": {"const": "convert"},
+            "skipped_lines": _SKIPPED_LINES,
             "format": {"enum": ["g2o", "toro", "tum", "kitti"]},
         },
     },
     "plot": {
         "type": "object",
-        "required": ["command", "inputs", "output"],
+        "required": ["command", "inputs", "output", "skipped_lines"],
         "properties": {
             "command": {"const": "plot"},
+            "skipped_lines": _SKIPPED_LINES,
             "inputs": {"type": "array", "items": {"type": "string"}},
         },
     },
@@ -201,9 +223,11 @@ SCHEMAS = {
             "ate",
             "rpe_translation",
             "rpe_rotation_deg",
+            "skipped_lines",
         ],
         "properties": {
             "command": {"const": "eval"},
+            "skipped_lines": _SKIPPED_LINES,
             "alignment": {"enum": ["se3", "sim3", "none"]},
             "scale": _NUMBER,
             "matched_poses": {"type": "integer"},

@@ -3,10 +3,11 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 from .graph import PoseGraph
-from .io import ReadOptions, read_graph, write_graph
+from .io import ReadResult, read_graph, write_graph
 from .io.errors import GraphFileError
 from .io.parsing import read_lines
 from .trajectory_io import Trajectory, as_se3, read_trajectory, write_trajectory
@@ -68,10 +69,12 @@ def convert(
     return file_format
 
 
-def load_trajectory(path: str, options: ReadOptions | None = None) -> Trajectory:
-    """Poses of any supported file: a graph's node values keyed by id, or a trajectory."""
+def load_trajectory(path: str, read: Callable[[str], ReadResult] = read_graph) -> Trajectory:
+    """Poses of any supported file: a trajectory, or the node values, keyed by id, of a graph
+    file read by ``read`` (path → ``ReadResult``; its options and its record of what was
+    skipped are the caller's)."""
     file_format = input_format(path)
     if file_format in TRAJECTORY_FORMATS:
         return read_trajectory(path, file_format)
-    graph = read_graph(path, options).graph
+    graph = read(path).graph
     return Trajectory(graph.node_ids.astype(float), as_se3(graph.values))

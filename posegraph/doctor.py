@@ -9,7 +9,6 @@ reading leniently.
 from __future__ import annotations
 
 import dataclasses
-from collections import Counter
 
 import numpy as np
 
@@ -142,17 +141,9 @@ def diagnose(read: ReadResult) -> Diagnosis:
             )
         )
     if read.skipped:
-        first_line: dict[str, int] = {}
-        for line, why in read.skipped:
-            first_line.setdefault(why, line)
-        counts = Counter(why for _, why in read.skipped)
-        reasons = "; ".join(
-            f"{count} × {why} (first at line {first_line[why]})"
-            for why, count in counts.most_common(3)
-        )
         problems.append(
             Problem(
-                f"{len(read.skipped)} line(s) skipped: {reasons}{'; …' if len(counts) > 3 else ''}",
+                read.skipped_report(),
                 "fix those lines, or accept that they are left out",
             )
         )

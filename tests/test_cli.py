@@ -360,6 +360,54 @@ def test_info_reports_problems_with_suggestions(tmp_path):
     assert "→" in text  # every problem comes with a suggestion
 
 
+def test_every_command_reports_the_lines_that_lenient_reading_skipped(tmp_path):
+    """--lenient leaves lines out of every result: text mode says so on stderr before any work,
+    JSON lists them by file and reason (``skipped_lines``), and --quiet prints nothing."""
+    lines = open(EXAMPLE_2D).read().splitlines()
+    landmarks = [f"LANDMARK2 {k} {k} 1.5 2.5" for k in (3, 4, 5)]  # gtsam's, not a pose tag
+    broken = tmp_path / "with_landmarks.g2o"
+    broken.write_text("\n".join([*lines, *landmarks, "EDGE_SE2 5 5 1 0 0 1 0 0 1 0 1"]) + "\n")
+    landmark_line, self_loop_line = len(lines) + 1, len(lines) + 4
+    expected = [
+        {
+            "path": str(broken),
+            "reason": "unknown tag 'LANDMARK2'",
+            "count": 3,
+            "first_line": landmark_line,
+        },
+        {
+            "path": str(broken),
+            "reason": "EDGE_SE2: edge from node 5 to itself",
+            "count": 1,
+            "first_line": self_loop_line,
+        },
+    ]
+    warning = (
+        f"posegraph: warning: {broken}: 4 line(s) skipped: 3 × unknown tag 'LANDMARK2' (first at "
+        f"line {landmark_line}); 1 × EDGE_SE2: edge from node 5 to itself (first at line "
+        f"{self_loop_line}); the results leave them out\n"
+    )
+    output = tmp_path / "out.g2o"
+
+    text = run("optimize", broken, "-o", output, "--lenient")
+    assert text.stderr == warning and "wrote" in text.stdout
+    quiet = run("optimize", broken, "-o", output, "--lenient", "--quiet", "--overwrite")
+    assert quiet.stderr == quiet.stdout == ""
+    assert run("convert", broken, tmp_path / "poses.tum", "--lenient").stderr == warning
+    assert run("info", broken, "--lenient").stderr == ""  # its report lists them as a problem
+
+    documents = {
+        "optimize": run_json("optimize", broken, "--lenient"),
+        "info": run_json("info", broken, "--lenient"),
+        "convert": run_json("convert", broken, tmp_path / "poses.g2o", "--lenient"),
+        "plot": run_json("plot", broken, EXAMPLE_2D, "-o", tmp_path / "both.png", "--lenient"),
+        "eval": run_json("eval", broken, EXAMPLE_2D, "--lenient"),
+    }
+    for command, document in documents.items():
+        assert document["skipped_lines"] == expected, command
+    assert run_json("convert", EXAMPLE_2D, tmp_path / "clean.g2o")["skipped_lines"] == []
+
+
 def test_info_counts_singular_information_and_flags_it_only_on_edges(tmp_path):
     """GNSS fixes without rotation information are singular by design: counted, not flagged
     (they were "condition number above 1e12"); a between edge that measures no rotation is

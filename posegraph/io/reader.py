@@ -77,6 +77,25 @@ class ReadResult:
     sim3_dialect: str | None
     """"a" (element) or "b" (log of the inverse) for Sim3 files."""
 
+    def skipped_by_reason(self) -> list[tuple[str, int, int]]:
+        """(reason, how many lines, the first one's number) of the skipped lines, most frequent
+        reason first (ties in the order of their first line)."""
+        first_line: dict[str, int] = {}
+        for line, why in self.skipped:
+            first_line.setdefault(why, line)
+        counts = Counter(why for _, why in self.skipped)
+        return [(why, count, first_line[why]) for why, count in counts.most_common()]
+
+    def skipped_report(self, reasons: int = 3) -> str:
+        """ "N line(s) skipped: k × reason (first at line L); …", naming the ``reasons`` most
+        frequent reasons."""
+        grouped = self.skipped_by_reason()
+        named = "; ".join(
+            f"{count} × {why} (first at line {line})" for why, count, line in grouped[:reasons]
+        )
+        more = "; …" if len(grouped) > reasons else ""
+        return f"{len(self.skipped)} line(s) skipped: {named}{more}"
+
 
 @dataclasses.dataclass
 class _Collected:
