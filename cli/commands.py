@@ -270,18 +270,18 @@ def eval(args: argparse.Namespace) -> int:  # noqa: A001 - the subcommand's name
 
 def scale_drift(args: argparse.Namespace) -> int:
     from posegraph.scale_drift import correct_scale_drift
-    from posegraph.trajectory_io import as_se3, write_trajectory
+    from posegraph.trajectory_io import write_trajectory
 
     _refuse_to_overwrite(args.input, args.output, args.overwrite)
     _check_output(args.output)
     _check_output(args.plot, figure=True)
     inputs = _Inputs(args)
     graph = inputs.graph(args.input).graph
-    before = Trajectory(graph.node_ids.astype(float), as_se3(graph.values))
+    before = Trajectory.of_graph(graph)
     correction = correct_scale_drift(graph, args.scale_information, args.convention)
     keys = correction.node_ids.astype(float)
     after = Trajectory(keys, correction.poses)  # in the convention asked for
-    corrected = Trajectory(keys, as_se3(correction.graph.values))  # world-from-camera
+    corrected = Trajectory.of_graph(correction.graph)  # world-from-camera
     if args.output:
         written = output_format(args.output)
         if written in ("tum", "kitti"):

@@ -10,7 +10,7 @@ from .graph import PoseGraph
 from .io import ReadResult, read_graph, write_graph
 from .io.errors import GraphFileError
 from .io.parsing import read_lines
-from .trajectory_io import Trajectory, as_se3, read_trajectory, write_trajectory
+from .trajectory_io import Trajectory, read_trajectory, write_trajectory
 
 SUFFIX_FORMATS = {
     ".g2o": "g2o",
@@ -64,8 +64,7 @@ def convert(
     if file_format in GRAPH_FORMATS:
         write_graph(graph, path, file_format, g2o_rotation_information, sim3_dialect)
     else:
-        trajectory = Trajectory(graph.node_ids.astype(float), as_se3(graph.values))
-        write_trajectory(trajectory, path, file_format)
+        write_trajectory(Trajectory.of_graph(graph), path, file_format)
     return file_format
 
 
@@ -76,5 +75,4 @@ def load_trajectory(path: str, read: Callable[[str], ReadResult] = read_graph) -
     file_format = input_format(path)
     if file_format in TRAJECTORY_FORMATS:
         return read_trajectory(path, file_format)
-    graph = read(path).graph
-    return Trajectory(graph.node_ids.astype(float), as_se3(graph.values))
+    return Trajectory.of_graph(read(path).graph)

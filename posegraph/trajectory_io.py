@@ -7,6 +7,7 @@ graph's export writes node ids there. KITTI lines have no key: the line index is
 from __future__ import annotations
 
 import dataclasses
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -16,6 +17,9 @@ from .io.parsing import quaternion_problems, read_lines
 from .io.writer import number_fields, refuse_non_finite
 from .lie import SE2, SE3, LieGroup, Sim3
 
+if TYPE_CHECKING:
+    from .graph import PoseGraph
+
 
 @dataclasses.dataclass(frozen=True)
 class Trajectory:
@@ -23,6 +27,12 @@ class Trajectory:
 
     keys: np.ndarray
     poses: SE3
+
+    @classmethod
+    def of_graph(cls, graph: PoseGraph, values: LieGroup | None = None) -> Trajectory:
+        """A graph's poses (``values``, by default its own) keyed by node id, as SE3
+        (``as_se3``)."""
+        return cls(graph.node_ids.astype(float), as_se3(graph.values if values is None else values))
 
     @property
     def positions(self) -> np.ndarray:

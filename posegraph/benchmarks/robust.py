@@ -43,12 +43,8 @@ from ..graph import PoseGraph
 from ..initialization import initialize
 from ..io import read_graph
 from ..lie import LieGroup
-from ..trajectory_io import Trajectory, as_se3
+from ..trajectory_io import Trajectory
 from .table import MarkdownTable
-
-
-def _trajectory(graph: PoseGraph, values: LieGroup) -> Trajectory:
-    return Trajectory(graph.node_ids.astype(float), as_se3(values))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -106,7 +102,7 @@ def cases(name: str) -> list[tuple[str, PoseGraph, Trajectory | None]]:
     graph = read_graph(str(shared_datasets_dir() / f"{name}.g2o")).graph
     label, measured, truth = with_truth(name, graph)
     own = [] if measured is graph else [("data", graph, None)]
-    return own + [(label, measured, _trajectory(measured, truth))]
+    return own + [(label, measured, Trajectory.of_graph(measured, truth))]
 
 
 def _solvers(gtsam: bool) -> list[Callable[..., Run]]:
@@ -132,7 +128,7 @@ def _loop_scores(
 ) -> str:
     """false rejected | true wrongly rejected | ATE | ATE ratio (– without a truth) | time."""
     false_rejected, true_rejected = rejection_rates(graph, false, run.rejected_edges)
-    ate = evaluate(_trajectory(graph, run.values), reference).ate.rmse
+    ate = evaluate(Trajectory.of_graph(graph, run.values), reference).ate.rmse
     ratio = "–" if ate_clean is None else f"{ate / ate_clean:.3f}"
     return f"{false_rejected:.1%} | {true_rejected:.2%} | {ate:.4g} | {ratio} | {run.seconds:.1f}"
 
@@ -149,7 +145,7 @@ def run(names: list[str], fractions: list[float], seeds: list[int], gtsam: bool 
     )
     for name in names:
         for label, graph, truth in cases(name):
-            clean = _trajectory(graph, optimize(graph.copy()).values)
+            clean = Trajectory.of_graph(graph, optimize(graph.copy()).values)
             ate_clean = evaluate(clean, truth).ate.rmse if truth else None
             against = "ground truth" if truth else "outlier-free"
             for fraction in fractions:
@@ -173,7 +169,7 @@ def _fix_scores(
     """false rejected | true wrongly rejected | loops rejected | ATE | ATE ratio | time."""
     rejected = np.zeros(false.size, dtype=bool)
     rejected[run.rejected_priors] = True
-    ate = evaluate(_trajectory(graph, run.values), reference).ate.rmse
+    ate = evaluate(Trajectory.of_graph(graph, run.values), reference).ate.rmse
     return (
         f"{rejected[false].mean():.1%} | {rejected[~false].mean():.2%} "
         f"| {len(run.rejected_edges)} | {ate:.4g} | {ate / ate_clean:.3f} | {run.seconds:.1f}"
@@ -201,12 +197,12 @@ def run_fixes(
         _, measured, truth = with_truth(name, graph)
         d, dof = graph.group.point_dim, graph.group.dof
         information = np.diag([4.0] * d + [400.0] * (dof - d))
-        reference = _trajectory(measured, truth)
+        reference = Trajectory.of_graph(measured, truth)
         for fraction in fractions:
             for seed in seeds:
                 fixed, false = add_fixes(measured, truth, 10, information, fraction, seed)
                 clean = without_priors(fixed, false)
-                ate_clean = evaluate(_trajectory(clean, optimize(clean).values), reference)
+                ate_clean = evaluate(Trajectory.of_graph(clean, optimize(clean).values), reference)
                 runs = [solver(fixed, robust_priors=True) for solver in _solvers(gtsam)]
                 cells = [f"{name} | {fraction:.0%} | {seed} | {ate_clean.ate.rmse:.4g}"]
                 cells += [_fix_scores(fixed, false, r, reference, ate_clean.ate.rmse) for r in runs]
