@@ -17,13 +17,13 @@ from posegraph.doctor import diagnose
 from posegraph.evaluation import evaluate
 from posegraph.io import ReadOptions, ReadResult, read_graph
 from posegraph.io.covariances import write_covariances
-from posegraph.solvers import SolverOptions
+from posegraph.solvers import SolverOptions, Summary
 from posegraph.sparse_cholesky import NotPositiveDefinite
 from posegraph.trajectory_io import Trajectory
 
 from .errors import EXIT_NOT_CONVERGED, EXIT_OK, UsageError, warn
 from .progress import Progress
-from .summary import format_diagnosis, format_evaluation, format_summary
+from .summary import format_diagnosis, format_evaluation, format_scale_drift, format_summary
 
 
 def _options(args: argparse.Namespace) -> ReadOptions:
@@ -121,23 +121,10 @@ def optimize(args: argparse.Namespace) -> int:
         except KeyError as error:
             raise UsageError(f"--fix: {error.args[0]}") from None
     before = graph.copy()
-    options = SolverOptions(
-        method=args.solver, max_iterations=args.max_iterations, time_limit=args.time_limit
-    )
     with Progress(enabled=not (args.quiet or args.json)) as progress:
-        result = posegraph.optimize(
-            graph,
-            init=args.init,
-            options=options,
-            callback=progress,
-            robust=args.robust,
-            robust_edges=args.robust_edges,
-            robust_priors=args.robust_priors,
-        )
+        result = posegraph.optimize(graph, callback=progress, **_solving(args))
     summary = result.summary
-    if progress.interrupted:
-        summary.termination = "interrupted (Ctrl-C)"
-        summary.converged = False
+    _note_interruption(progress, summary)
     if not math.isfinite(summary.final_error):
         raise UsageError(
             f"{args.input}: the optimisation ended with error {summary.final_error} (at the file's "
@@ -178,6 +165,27 @@ def optimize(args: argparse.Namespace) -> int:
     written = {"wrote": args.output, "plotted": args.plot, "covariances": args.covariances}
     _emit(args, record, format_summary(args.input, graph, summary, written))
     return EXIT_OK if summary.converged else EXIT_NOT_CONVERGED
+
+
+def _solving(args: argparse.Namespace) -> dict:
+    """``optimize``'s keyword arguments from the solving options (``--solver``, ``--init``,
+    ``--robust…``, ``--max-iterations``, ``--time-limit``)."""
+    return {
+        "init": args.init,
+        "options": SolverOptions(
+            method=args.solver, max_iterations=args.max_iterations, time_limit=args.time_limit
+        ),
+        "robust": args.robust,
+        "robust_edges": args.robust_edges,
+        "robust_priors": args.robust_priors,
+    }
+
+
+def _note_interruption(progress: Progress, summary: Summary) -> None:
+    """A run that Ctrl-C stopped did not converge, whatever its last iteration said."""
+    if progress.interrupted:
+        summary.termination = "interrupted (Ctrl-C)"
+        summary.converged = False
 
 
 def _covariances(source: str, graph: posegraph.PoseGraph) -> np.ndarray:
@@ -277,10 +285,15 @@ def scale_drift(args: argparse.Namespace) -> int:
     _check_output(args.plot, figure=True)
     inputs = _Inputs(args)
     graph = inputs.graph(args.input).graph
+    truth = inputs.trajectory(args.gt) if args.gt else None  # read before the work
     before = Trajectory.of_graph(graph)
-    correction = correct_scale_drift(graph, args.scale_information, args.convention)
-    keys = correction.node_ids.astype(float)
-    after = Trajectory(keys, correction.poses)  # in the convention asked for
+    with Progress(enabled=not (args.quiet or args.json)) as progress:
+        correction = correct_scale_drift(
+            graph, args.scale_information, args.convention, callback=progress, **_solving(args)
+        )
+    summary = correction.result.summary
+    _note_interruption(progress, summary)
+    after = Trajectory(correction.node_ids.astype(float), correction.poses)  # as asked for
     corrected = Trajectory.of_graph(correction.graph)  # world-from-camera
     if args.output:
         written = output_format(args.output)
@@ -288,6 +301,17 @@ def scale_drift(args: argparse.Namespace) -> int:
             write_trajectory(after, args.output, written)
         else:
             convert_graph(correction.graph, args.output, written)
+    ate = None
+    if truth is not None:
+        ate = tuple(evaluate(poses, truth, "se3").ate.rmse for poses in (before, corrected))
+    if args.plot:
+        from posegraph.plotting import plot_trajectories
+
+        curves = [("before", before.positions), ("corrected", corrected.positions)]
+        if truth is not None:
+            curves.append(("ground truth", truth.positions))
+        title = f"scale-drift correction: {os.path.basename(args.input)} (top view)"
+        plot_trajectories(curves, args.plot, title=title, view="top")
     record = {
         "command": "scale-drift",
         "input": args.input,
@@ -297,40 +321,14 @@ def scale_drift(args: argparse.Namespace) -> int:
         "nodes": graph.num_nodes,
         "edges": graph.num_edges,
         "scale_range": [float(correction.scales.min()), float(correction.scales.max())],
-        "summary": correction.result.summary.as_dict(),
-        "ate_before": None,
-        "ate_after": None,
+        "summary": summary.as_dict(),
+        "ate_before": ate[0] if ate else None,
+        "ate_after": ate[1] if ate else None,
+        "skipped_lines": inputs.skipped_lines,
     }
-    lines = [
-        f"{args.input}: {graph.num_nodes} poses, {graph.num_edges} edges, optimised in Sim3",
-        f"  error ½Σrᵀ Ω r  {correction.result.summary.initial_error:.10g} -> {correction.result.summary.final_error:.10g}",
-        f"  scales          {correction.scales.min():.4g} … {correction.scales.max():.4g}",
-        f"  termination     {correction.result.summary.termination}",
-    ]
-    curves = [
-        ("before", before.positions),
-        ("corrected", corrected.positions),
-    ]
-    if args.gt:
-        truth = inputs.trajectory(args.gt)
-        ate_before = evaluate(before, truth, "se3").ate.rmse
-        ate_after = evaluate(corrected, truth, "se3").ate.rmse
-        record["ate_before"], record["ate_after"] = ate_before, ate_after
-        lines.append(
-            f"  ATE (SE3-aligned, no scale)  before {ate_before:.6g}  after {ate_after:.6g}"
-        )
-        curves.append(("ground truth", truth.positions))
-    if args.output:
-        lines.append(f"  wrote           {args.output}")
-    if args.plot:
-        from posegraph.plotting import plot_trajectories
-
-        title = f"scale-drift correction: {os.path.basename(args.input)} (top view)"
-        plot_trajectories(curves, args.plot, title=title, view="top")
-        lines.append(f"  plotted         {args.plot}")
-    record["skipped_lines"] = inputs.skipped_lines
-    _emit(args, record, "\n".join(lines))
-    return EXIT_OK if correction.result.summary.converged else EXIT_NOT_CONVERGED
+    written = {"wrote": args.output, "plotted": args.plot}
+    _emit(args, record, format_scale_drift(args.input, correction, ate, written))
+    return EXIT_OK if summary.converged else EXIT_NOT_CONVERGED
 
 
 def bench(args: argparse.Namespace) -> int:

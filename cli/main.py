@@ -46,7 +46,8 @@ EXAMPLES = {
   posegraph eval KeyFrameTrajectory.txt groundtruth.txt --align sim3 --max-time-difference 0.01""",
     "scale-drift": """examples:
   posegraph scale-drift monocular.g2o -o corrected.tum --gt groundtruth.tum --plot drift.png
-  posegraph scale-drift monocular.g2o -o corrected.g2o --convention camera_from_world --json""",
+  posegraph scale-drift monocular.g2o -o corrected.g2o --convention camera_from_world --json
+  posegraph scale-drift place_recognition.g2o -o corrected.tum --robust gnc  # false loops""",
     "bench": """examples:
   posegraph bench --graphs sphere2500 parking-garage --repeats 3""",
 }
@@ -87,6 +88,35 @@ def _parser() -> argparse.ArgumentParser:
         help="order of the information values on EDGE2 lines: toro (I11 I12 I22 I33 I13 I23, "
         "default) or g2o (I11 I12 I13 I22 I23 I33, as gtsam's readG2o reads them)",
     )
+    solving = argparse.ArgumentParser(add_help=False)
+    solving.add_argument("--solver", choices=["lm", "gn"], default="lm", help="default: lm")
+    solving.add_argument(
+        "--init",
+        choices=INITIALIZERS,
+        default="auto",
+        help="default: auto (chordal relaxation when the graph has loops, else odometry)",
+    )
+    solving.add_argument(
+        "--robust",
+        metavar="KERNEL[:WIDTH]",
+        help="gnc (truncated least squares by graduated non-convexity), huber, cauchy, "
+        "geman-mcclure, tukey or dcs; width in Mahalanobis units (default √χ²_k(0.999) for "
+        "gnc, √χ²_k(0.95) for the others, k the directions a measurement weighs: 3 for an SE3 "
+        "position-only fix)",
+    )
+    solving.add_argument(
+        "--robust-edges",
+        choices=["loops", "all"],
+        default="loops",
+        help="edges the kernel applies to (default: loops, i.e. not between consecutive nodes)",
+    )
+    solving.add_argument(
+        "--robust-priors",
+        action="store_true",
+        help="apply the kernel to the priors too (absolute fixes such as GNSS)",
+    )
+    solving.add_argument("--max-iterations", type=at_least(0), default=100, help="default: 100")
+    solving.add_argument("--time-limit", type=at_least(0, float), help="seconds")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     def command(name: str, help_text: str, parents) -> argparse.ArgumentParser:
@@ -99,43 +129,15 @@ def _parser() -> argparse.ArgumentParser:
             formatter_class=argparse.RawDescriptionHelpFormatter,
         )
 
-    opt = command("optimize", "optimise a g2o or TORO pose graph", [common, reading])
+    opt = command("optimize", "optimise a g2o or TORO pose graph", [common, reading, solving])
     opt.add_argument("input", help="g2o or TORO file")
     opt.add_argument("-o", "--output", help="write the optimised graph here (format by suffix)")
-    opt.add_argument("--solver", choices=["lm", "gn"], default="lm", help="default: lm")
-    opt.add_argument(
-        "--init",
-        choices=INITIALIZERS,
-        default="auto",
-        help="default: auto (chordal relaxation when the graph has loops, else odometry)",
-    )
-    opt.add_argument(
-        "--robust",
-        metavar="KERNEL[:WIDTH]",
-        help="gnc (truncated least squares by graduated non-convexity), huber, cauchy, "
-        "geman-mcclure, tukey or dcs; width in Mahalanobis units (default √χ²_k(0.999) for "
-        "gnc, √χ²_k(0.95) for the others, k the directions a measurement weighs: 3 for an SE3 "
-        "position-only fix)",
-    )
-    opt.add_argument(
-        "--robust-edges",
-        choices=["loops", "all"],
-        default="loops",
-        help="edges the kernel applies to (default: loops, i.e. not between consecutive nodes)",
-    )
-    opt.add_argument(
-        "--robust-priors",
-        action="store_true",
-        help="apply the kernel to the priors too (absolute fixes such as GNSS)",
-    )
     opt.add_argument(
         "--covariances",
         metavar="FILE",
         help="write every pose's marginal covariance at the optimum here (text: id, then the "
         "upper triangle over the tangent; README)",
     )
-    opt.add_argument("--max-iterations", type=at_least(0), default=100, help="default: 100")
-    opt.add_argument("--time-limit", type=at_least(0, float), help="seconds")
     opt.add_argument(
         "--fix", type=int, nargs="+", metavar="ID", default=[], help="hold these nodes"
     )
@@ -184,7 +186,7 @@ def _parser() -> argparse.ArgumentParser:
     drift = command(
         "scale-drift",
         "correct monocular scale drift: SE3 odometry + Sim3 loop closures, optimised in Sim3",
-        [common, reading],
+        [common, reading, solving],
     )
     drift.add_argument(
         "input", help="g2o with SE3 odometry and EDGE_SIM3:EXPMAP loops (or all Sim3)"

@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from posegraph.doctor import Diagnosis
 from posegraph.evaluation import Evaluation
 from posegraph.graph import PoseGraph
 from posegraph.solvers import Summary
+
+if TYPE_CHECKING:
+    from posegraph.scale_drift import ScaleDriftCorrection
 
 
 def format_summary(
@@ -15,23 +20,68 @@ def format_summary(
     phases = summary.phase_times
     lines = [
         f"{source}: {graph.group.__name__}, {graph.num_nodes} nodes, {graph.num_edges} edges",
-        f"  initialisation  {summary.initialization} ({summary.initialization_time:.3f} s)",
+        _initialisation_line(summary),
         *_error_lines(summary),
         f"  iterations      {summary.num_iterations} ({summary.method}, {summary.linear_solver})",
-        f"  termination     {summary.termination}{'' if summary.converged else ' (not converged)'}",
+        _termination_line(summary),
         f"  time            {summary.total_time:.3f} s: "
         + ", ".join(f"{name} {seconds:.3f}" for name, seconds in phases.items()),
+        *_robust_lines(graph, summary),
+        *_written_lines(written),
     ]
-    if summary.robust:
-        lines.append(
-            f"  robust          {summary.robust} on {_covered(graph, summary)}: "
-            + _rejected(graph, summary)
-        )
-        if 2 * len(summary.rejected_edges) > summary.edges_under_kernel:
-            hint = MOST_REJECTED.format(kernel=summary.robust.partition(":")[0])
-            lines.append(f"  {'':<15} {hint}")
-    lines.extend(f"  {what:<15} {path}" for what, path in written.items() if path)
     return "\n".join(lines)
+
+
+def format_scale_drift(
+    source: str,
+    correction: ScaleDriftCorrection,
+    ate: tuple[float, float] | None,
+    written: dict[str, str | None],
+) -> str:
+    """The report of a scale-drift correction; ``ate``: the ATE (SE3-aligned) before and after,
+    against ground truth, if given; ``written``: the files written, by what they hold."""
+    summary, graph, scales = correction.result.summary, correction.graph, correction.scales
+    lines = [
+        f"{source}: {graph.num_nodes} poses, {graph.num_edges} edges, optimised in Sim3",
+        _initialisation_line(summary),
+        *_error_lines(summary),
+        f"  scales          {scales.min():.4g} … {scales.max():.4g}",
+        _termination_line(summary),
+        f"  time            {summary.total_time:.3f} s, {summary.num_iterations} iterations",
+        *_robust_lines(graph, summary),
+    ]
+    if ate is not None:
+        lines.append(f"  ATE (SE3-aligned, no scale)  before {ate[0]:.6g}  after {ate[1]:.6g}")
+    return "\n".join([*lines, *_written_lines(written)])
+
+
+def _initialisation_line(summary: Summary) -> str:
+    return f"  initialisation  {summary.initialization} ({summary.initialization_time:.3f} s)"
+
+
+def _termination_line(summary: Summary) -> str:
+    return (
+        f"  termination     {summary.termination}{'' if summary.converged else ' (not converged)'}"
+    )
+
+
+def _robust_lines(graph: PoseGraph, summary: Summary) -> list[str]:
+    """What a robust run's kernel covered and rejected, with a hint when it rejected most of
+    it; nothing for least squares."""
+    if not summary.robust:
+        return []
+    lines = [
+        f"  robust          {summary.robust} on {_covered(graph, summary)}: "
+        + _rejected(graph, summary)
+    ]
+    if 2 * len(summary.rejected_edges) > summary.edges_under_kernel:
+        hint = MOST_REJECTED.format(kernel=summary.robust.partition(":")[0])
+        lines.append(f"  {'':<15} {hint}")
+    return lines
+
+
+def _written_lines(written: dict[str, str | None]) -> list[str]:
+    return [f"  {what:<15} {path}" for what, path in written.items() if path]
 
 
 MOST_REJECTED = (

@@ -25,7 +25,7 @@ from .api import optimize
 from .graph import PoseGraph
 from .lie import SE3, Sim3
 from .lifting import default_scale_information, lift_information, lift_se3
-from .solvers import Result, SolverOptions
+from .solvers import Callback, Result, SolverOptions
 from .trajectory_io import as_se3
 
 CONVENTIONS = ("world_from_camera", "camera_from_world")
@@ -101,6 +101,8 @@ def correct_scale_drift(
     init: str = "auto",
     robust: str | None = None,
     robust_edges: str | np.ndarray = "loops",
+    robust_priors: bool = False,
+    callback: Callback | None = None,
 ) -> ScaleDriftCorrection:
     """Correct the scale drift of a graph: an SE3 graph is lifted first (then it needs
     Sim3 loop closures added to gain anything); a Sim3 graph, such as a g2o file of SE3
@@ -108,9 +110,10 @@ def correct_scale_drift(
 
     ``convention`` names how the returned ``poses`` are expressed. ``init`` is the initialisation
     (default "auto": chordal relaxation of rotations, log-scales and translations when the graph
-    has loops, which copes with drift that dead reckoning cannot start from). ``robust`` and
-    ``robust_edges`` are ``optimize``'s: with ``robust="gnc"``, loop closures from place
-    recognition that matched the wrong place are rejected (``result.summary.rejected_edges``).
+    has loops, which copes with drift that dead reckoning cannot start from). ``robust``,
+    ``robust_edges``, ``robust_priors`` and ``callback`` are ``optimize``'s: with
+    ``robust="gnc"``, loop closures from place recognition that matched the wrong place are
+    rejected (``result.summary.rejected_edges``).
     """
     _check_convention(convention)
     sim3 = lift_graph(graph, scale_information) if graph.group is SE3 else graph.copy()
@@ -119,7 +122,15 @@ def correct_scale_drift(
             f"scale-drift correction needs an SE3 or Sim3 graph, not {graph.group.__name__}"
         )
     # ``optimize`` leaves the solution in ``sim3``.
-    result = optimize(sim3, init=init, options=options, robust=robust, robust_edges=robust_edges)
+    result = optimize(
+        sim3,
+        init=init,
+        options=options,
+        callback=callback,
+        robust=robust,
+        robust_edges=robust_edges,
+        robust_priors=robust_priors,
+    )
     return ScaleDriftCorrection(
         poses=sim3_to_se3(result.values, convention),
         scales=np.asarray(result.values.scale).copy(),
