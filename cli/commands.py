@@ -32,7 +32,7 @@ def _options(args: argparse.Namespace) -> ReadOptions:
         g2o_rotation_information=args.g2o_rotation_information,
         identity_information=args.identity_information,
         edge2_order=args.edge2_order,
-        scale_information=getattr(args, "scale_information", None),
+        scale_information=args.scale_information,
     )
 
 
@@ -163,7 +163,8 @@ def optimize(args: argparse.Namespace) -> int:
         "skipped_lines": inputs.skipped_lines,
     }
     written = {"wrote": args.output, "plotted": args.plot, "covariances": args.covariances}
-    _emit(args, record, format_summary(args.input, graph, summary, written))
+    text = format_summary(args.input, graph, summary, written, read.lifted_scale_information)
+    _emit(args, record, text)
     return EXIT_OK if summary.converged else EXIT_NOT_CONVERGED
 
 
@@ -284,7 +285,8 @@ def scale_drift(args: argparse.Namespace) -> int:
     _check_output(args.output)
     _check_output(args.plot, figure=True)
     inputs = _Inputs(args)
-    graph = inputs.graph(args.input).graph
+    read = inputs.graph(args.input)
+    graph = read.graph
     truth = inputs.trajectory(args.gt) if args.gt else None  # read before the work
     before = Trajectory.of_graph(graph)
     with Progress(enabled=not (args.quiet or args.json)) as progress:
@@ -321,13 +323,15 @@ def scale_drift(args: argparse.Namespace) -> int:
         "nodes": graph.num_nodes,
         "edges": graph.num_edges,
         "scale_range": [float(correction.scales.min()), float(correction.scales.max())],
+        "lifted_scale_information": read.lifted_scale_information,
         "summary": summary.as_dict(),
         "ate_before": ate[0] if ate else None,
         "ate_after": ate[1] if ate else None,
         "skipped_lines": inputs.skipped_lines,
     }
     written = {"wrote": args.output, "plotted": args.plot}
-    _emit(args, record, format_scale_drift(args.input, correction, ate, written))
+    text = format_scale_drift(args.input, correction, ate, written, read.lifted_scale_information)
+    _emit(args, record, text)
     return EXIT_OK if summary.converged else EXIT_NOT_CONVERGED
 
 

@@ -88,6 +88,13 @@ def _parser() -> argparse.ArgumentParser:
         help="order of the information values on EDGE2 lines: toro (I11 I12 I22 I33 I13 I23, "
         "default) or g2o (I11 I12 I13 I22 I23 I33, as gtsam's readG2o reads them)",
     )
+    reading.add_argument(
+        "--scale-information",
+        type=float,
+        help="information on log-scale of SE3 edges lifted to Sim3, in files mixing SE3 and Sim3 "
+        "lines (and, for scale-drift, in SE3 files): 1/σ², σ the relative scale drift per edge "
+        "(default: from their translation information, as the reports show)",
+    )
     solving = argparse.ArgumentParser(add_help=False)
     solving.add_argument("--solver", choices=["lm", "gn"], default="lm", help="default: lm")
     solving.add_argument(
@@ -199,11 +206,6 @@ def _parser() -> argparse.ArgumentParser:
     )
     drift.add_argument(
         "--plot", metavar="FIG.png", help="trajectories before/after (and ground truth)"
-    )
-    drift.add_argument(
-        "--scale-information",
-        type=float,
-        help="information on log-scale of the lifted SE3 edges (default: from their translation information)",
     )
     drift.add_argument(
         "--convention",

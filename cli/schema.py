@@ -108,6 +108,7 @@ SCHEMAS = {
             "nodes",
             "edges",
             "scale_range",
+            "lifted_scale_information",
             "summary",
             "ate_before",
             "ate_after",
@@ -118,6 +119,7 @@ SCHEMAS = {
             "skipped_lines": _SKIPPED_LINES,
             "convention": {"enum": ["world_from_camera", "camera_from_world"]},
             "scale_range": {"type": "array", "items": _NUMBER, "minItems": 2, "maxItems": 2},
+            "lifted_scale_information": {"type": ["number", "null"]},
             "summary": SUMMARY,
             "ate_before": {"type": ["number", "null"]},
             "ate_after": {"type": ["number", "null"]},
@@ -169,6 +171,7 @@ SCHEMAS = {
             "initial_error",
             "initial_chi2",
             "problems",
+            "lifted_scale_information",
             "skipped_lines",
         ],
         "properties": {
@@ -180,6 +183,7 @@ SCHEMAS = {
             "condition_numbers": {"type": "object", "additionalProperties": _NUMBER},
             "singular_information": {"type": "integer", "minimum": 0},
             "loop_closures": {"type": "integer", "minimum": 0},
+            "lifted_scale_information": {"type": ["number", "null"]},
             "problems": {
                 "type": "array",
                 "items": {

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 from posegraph.doctor import Diagnosis
@@ -14,19 +15,25 @@ if TYPE_CHECKING:
 
 
 def format_summary(
-    source: str, graph: PoseGraph, summary: Summary, written: dict[str, str | None]
+    source: str,
+    graph: PoseGraph,
+    summary: Summary,
+    written: dict[str, str | None],
+    lifted_scale_information: float | None = None,
 ) -> str:
-    """The report of an optimisation; ``written``: the files written, by what they hold."""
+    """The report of an optimisation; ``written``: the files written, by what they hold;
+    ``lifted_scale_information``: that of the SE3 lines of a file mixing SE3 and Sim3."""
     phases = summary.phase_times
     lines = [
         f"{source}: {graph.group.__name__}, {graph.num_nodes} nodes, {graph.num_edges} edges",
+        *_lifted_lines(lifted_scale_information),
         _initialisation_line(summary),
         *_error_lines(summary),
         f"  iterations      {summary.num_iterations} ({summary.method}, {summary.linear_solver})",
         _termination_line(summary),
         f"  time            {summary.total_time:.3f} s: "
         + ", ".join(f"{name} {seconds:.3f}" for name, seconds in phases.items()),
-        *_robust_lines(graph, summary),
+        *_robust_lines(graph, summary, lifted_scale_information),
         *_written_lines(written),
     ]
     return "\n".join(lines)
@@ -37,18 +44,21 @@ def format_scale_drift(
     correction: ScaleDriftCorrection,
     ate: tuple[float, float] | None,
     written: dict[str, str | None],
+    lifted_scale_information: float | None = None,
 ) -> str:
     """The report of a scale-drift correction; ``ate``: the ATE (SE3-aligned) before and after,
-    against ground truth, if given; ``written``: the files written, by what they hold."""
+    against ground truth, if given; ``written``: the files written, by what they hold;
+    ``lifted_scale_information``: that of the SE3 lines of a file mixing SE3 and Sim3."""
     summary, graph, scales = correction.result.summary, correction.graph, correction.scales
     lines = [
         f"{source}: {graph.num_nodes} poses, {graph.num_edges} edges, optimised in Sim3",
+        *_lifted_lines(lifted_scale_information),
         _initialisation_line(summary),
         *_error_lines(summary),
         f"  scales          {scales.min():.4g} … {scales.max():.4g}",
         _termination_line(summary),
         f"  time            {summary.total_time:.3f} s, {summary.num_iterations} iterations",
-        *_robust_lines(graph, summary),
+        *_robust_lines(graph, summary, lifted_scale_information),
     ]
     if ate is not None:
         lines.append(f"  ATE (SE3-aligned, no scale)  before {ate[0]:.6g}  after {ate[1]:.6g}")
@@ -65,9 +75,12 @@ def _termination_line(summary: Summary) -> str:
     )
 
 
-def _robust_lines(graph: PoseGraph, summary: Summary) -> list[str]:
+def _robust_lines(
+    graph: PoseGraph, summary: Summary, lifted_scale_information: float | None
+) -> list[str]:
     """What a robust run's kernel covered and rejected, with a hint when it rejected most of
-    it; nothing for least squares."""
+    it (and on lifted SE3 odometry, one on its scale information); nothing for least
+    squares."""
     if not summary.robust:
         return []
     lines = [
@@ -77,7 +90,24 @@ def _robust_lines(graph: PoseGraph, summary: Summary) -> list[str]:
     if 2 * len(summary.rejected_edges) > summary.edges_under_kernel:
         hint = MOST_REJECTED.format(kernel=summary.robust.partition(":")[0])
         lines.append(f"  {'':<15} {hint}")
+        if lifted_scale_information is not None:
+            lines.append(f"  {'':<15} {STIFF_SCALE.format(_scale_sigma(lifted_scale_information))}")
     return lines
+
+
+def _lifted_lines(scale_information: float | None) -> list[str]:
+    """How the SE3 lines of a file mixing SE3 and Sim3 were lifted; nothing if none were."""
+    if scale_information is None:
+        return []
+    return [
+        f"  lifted          SE3 lines to Sim3: log-scale information {scale_information:.4g}, a"
+        f" scale change of {_scale_sigma(scale_information)} per edge (1σ; --scale-information)"
+    ]
+
+
+def _scale_sigma(scale_information: float) -> str:
+    """The 1σ relative scale change that log-scale information allows, as a percentage."""
+    return f"{100.0 / math.sqrt(scale_information):.2g}%"
 
 
 def _written_lines(written: dict[str, str | None]) -> list[str]:
@@ -90,6 +120,13 @@ MOST_REJECTED = (
     " (--robust {kernel}:WIDTH)"
 )
 """The report's hint when a robust run rejected more than half of the edges it covered."""
+
+STIFF_SCALE = (
+    "the lifted SE3 odometry allows a scale change of only {} per edge (1σ): loops that"
+    " correct a faster drift look false to it; set --scale-information to 1/σ², σ the expected"
+    " scale drift per edge (1e4 for 1%)"
+)
+"""The second hint, on a file whose SE3 lines were lifted to Sim3."""
 
 SHOWN_REJECTED = 5
 """Rejected edges and priors named in the report; ``--json`` lists them all."""
@@ -162,6 +199,7 @@ def format_diagnosis(d: Diagnosis) -> str:
         )
     if kinds:
         lines.append(f"  information     {'; '.join(kinds)}")
+    lines.extend(_lifted_lines(d.lifted_scale_information))
     lines.append(f"  initial error   {d.initial_error:.10g} (½Σrᵀ Ω r), chi2 {d.initial_chi2:.10g}")
     if d.problems:
         lines.append(f"  problems        {len(d.problems)}")

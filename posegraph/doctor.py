@@ -49,6 +49,9 @@ class Diagnosis:
     initial_error: float
     initial_chi2: float
     problems: list[Problem]
+    lifted_scale_information: float | None
+    """The log-scale information of the SE3 lines lifted to Sim3 in a file mixing both (None if
+    nothing was lifted): ``ReadResult.lifted_scale_information``."""
 
     def as_dict(self) -> dict:
         record = dataclasses.asdict(self)
@@ -180,4 +183,5 @@ def diagnose(read: ReadResult) -> Diagnosis:
         initial_error=0.5 * total,
         initial_chi2=total,
         problems=problems,
+        lifted_scale_information=read.lifted_scale_information,
     )

@@ -15,6 +15,14 @@ def lift_se3(element: SE3, scale: float | np.ndarray = 1.0) -> Sim3:
     )
 
 
+def check_scale_information(scale_information: float | None) -> None:
+    """Refuse a log-scale information that is not a positive finite number (None: the default)."""
+    if scale_information is not None and not 0 < scale_information < np.inf:
+        raise ValueError(
+            f"scale information must be positive and finite, not {scale_information:g}"
+        )
+
+
 def lift_information(information: np.ndarray, scale_information: float) -> np.ndarray:
     """(…, 7, 7) Sim3 information over (ρ, φ, σ) from (…, 6, 6) SE3 information over (ρ, φ)."""
     information = np.asarray(information, float)

@@ -24,7 +24,12 @@ import numpy as np
 from .api import optimize
 from .graph import PoseGraph
 from .lie import SE3, Sim3
-from .lifting import default_scale_information, lift_information, lift_se3
+from .lifting import (
+    check_scale_information,
+    default_scale_information,
+    lift_information,
+    lift_se3,
+)
 from .solvers import Callback, Result, SolverOptions
 from .trajectory_io import as_se3
 
@@ -42,8 +47,7 @@ def lift_graph(graph: PoseGraph, scale_information: float | None = None) -> Pose
     fixed (and so fix the scale gauge)."""
     if graph.group is not SE3:
         raise ValueError(f"lift_graph takes an SE3 graph, not {graph.group.__name__}")
-    if scale_information is not None and not scale_information > 0:
-        raise ValueError(f"scale information must be positive, not {scale_information}")
+    check_scale_information(scale_information)
     if scale_information is None:
         scale_information = default_scale_information(
             graph.edges.information, graph.edges.measurements

@@ -552,7 +552,15 @@ def test_numeric_arguments_are_checked_by_the_parser():
         (["bench", "--repeats", "0"], "--repeats: must be ≥ 1"),
         (["bench", "--rounds", "0"], "--rounds: must be ≥ 1"),
         (["bench", "--budget", "-0.5"], "--budget: must be ≥ 0"),
-        (["scale-drift", EXAMPLE, "--scale-information", "0"], "must be positive, not 0"),
+        (
+            ["scale-drift", EXAMPLE, "--scale-information", "0"],
+            "must be positive and finite, not 0",
+        ),
+        (["info", EXAMPLE, "--scale-information", "-1"], "must be positive and finite, not -1"),
+        (
+            ["optimize", EXAMPLE, "--scale-information", "nan"],
+            "must be positive and finite, not nan",
+        ),
     ]
     for args, message in cases:
         failed = run(*args, check_exit=2)
@@ -645,3 +653,44 @@ def test_scale_drift_command_rejects_false_loops(tmp_path):
     assert robust["ate_after"] == pytest.approx(without["ate_after"], rel=1e-3)
     text = run("scale-drift", source, "--robust", "gnc").stdout
     assert "robust          gnc:" in text and "on 29 of 328 edges: 9 edge(s) rejected: " in text
+
+
+def test_reports_give_the_scale_information_of_lifted_se3_odometry(tmp_path):
+    """The SE3 odometry of a file with Sim3 loops is lifted to Sim3 with some log-scale
+    information: info and scale-drift report it, with the scale change it allows. When a robust
+    run rejects most loops, the report says it may be too stiff, and setting it as the hint says
+    keeps every loop. (At 2% drift per keyframe the default makes GNC reject all 20 true loops:
+    stop 29's scale-drift table.)"""
+    from posegraph_datasets.monocular import monocular_sequence, write_sequence
+
+    from posegraph.lifting import default_scale_information
+
+    source, truth = tmp_path / "mono.g2o", tmp_path / "gt.tum"
+    sequence = monocular_sequence(drift=0.02, seed=1)
+    write_sequence(sequence, str(source), str(truth))
+    odometry = sequence.odometry.edges
+    default = default_scale_information(odometry.information, odometry.measurements)
+    assert run_json("info", source)["lifted_scale_information"] == pytest.approx(default, rel=1e-9)
+    assert run_json("info", source, "--scale-information", 2500)["lifted_scale_information"] == 2500
+    assert run_json("info", EXAMPLE)["lifted_scale_information"] is None  # SE3 lines only
+    sigma = f"{100 / np.sqrt(default):.2g}%"
+    assert f"a scale change of {sigma} per edge" in run("info", source).stdout
+
+    text = run("scale-drift", source, "--robust", "gnc").stdout
+    assert "most of the edges under the kernel were rejected" in text
+    assert f"allows a scale change of only {sigma} per edge" in text
+    stiff = run_json("scale-drift", source, "--gt", truth, "--robust", "gnc")
+    assert len(stiff["summary"]["rejected_edges"]) == 20
+    two_percent = 1 / 0.02**2  # as the hint says, for the drift of this sequence
+    suggested = run_json(
+        "scale-drift", source, "--gt", truth, "--robust", "gnc", "--scale-information", two_percent
+    )
+    assert suggested["lifted_scale_information"] == two_percent
+    assert suggested["summary"]["rejected_edges"] == []
+    assert suggested["ate_after"] * 100 < stiff["ate_after"]
+    assert (
+        "allows a scale change"
+        not in run(
+            "scale-drift", source, "--robust", "gnc", "--scale-information", two_percent
+        ).stdout
+    )

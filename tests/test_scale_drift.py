@@ -13,6 +13,7 @@ from posegraph.chordal import chordal_values
 from posegraph.graph import PoseGraph
 from posegraph.io import ReadOptions
 from posegraph.lie import Sim3
+from posegraph.lifting import default_scale_information
 from posegraph.scale_drift import convert_convention, correct_scale_drift, lift_graph
 
 
@@ -106,6 +107,11 @@ def test_mixed_g2o_files_read_as_one_sim3_graph(tmp_path, dialect):
     path, truth = tmp_path / "mono.g2o", tmp_path / "gt.tum"
     write_sequence(sequence, str(path), str(truth), dialect=dialect)
     read = posegraph.read_graph(str(path), ReadOptions(scale_information=50.0))
+    assert read.lifted_scale_information == 50.0
+    odometry = sequence.odometry.edges
+    assert posegraph.read_graph(str(path)).lifted_scale_information == pytest.approx(
+        default_scale_information(odometry.information, odometry.measurements), rel=1e-9
+    )
     assert read.tag_counts == {
         "VERTEX_SE3:QUAT": 150,
         "EDGE_SE3:QUAT": 149,
@@ -123,7 +129,9 @@ def test_mixed_g2o_files_read_as_one_sim3_graph(tmp_path, dialect):
     for out_dialect in ("a", "b"):
         out = tmp_path / f"out_{out_dialect}.g2o"
         posegraph.write_graph(graph, str(out), sim3_dialect=out_dialect)
-        again = posegraph.read_graph(str(out)).graph
+        again_read = posegraph.read_graph(str(out))
+        assert again_read.lifted_scale_information is None  # Sim3 lines only: nothing lifted
+        again = again_read.graph
         np.testing.assert_allclose(again.values.as_matrix(), graph.values.as_matrix(), atol=1e-10)
         np.testing.assert_allclose(
             again.edges.measurements.as_matrix(), graph.edges.measurements.as_matrix(), atol=1e-10

@@ -10,7 +10,12 @@ import numpy as np
 from ..graph import PoseGraph, information_problems
 from ..initialization import align_to_priors, spanning_tree_values
 from ..lie import SE3, Sim3
-from ..lifting import default_scale_information, lift_information, lift_se3
+from ..lifting import (
+    check_scale_information,
+    default_scale_information,
+    lift_information,
+    lift_se3,
+)
 from .errors import GraphFileError
 from .parsing import LineChecker, Rows, quaternion_problems, read_lines, to_rows
 from .tags import (
@@ -58,6 +63,7 @@ class ReadOptions:
             raise ValueError(
                 f"edge2_order must be one of {', '.join(EDGE2_ORDERS)}, not {self.edge2_order!r}"
             )
+        check_scale_information(self.scale_information)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -76,6 +82,10 @@ class ReadResult:
     """Ids of nodes that had no vertex line, initialised by composing odometry."""
     sim3_dialect: str | None
     """"a" (element) or "b" (log of the inverse) for Sim3 files."""
+    lifted_scale_information: float | None = None
+    """In a file mixing SE3 and Sim3 lines, the information on log-scale that the SE3 edges and
+    priors were lifted to Sim3 with (``ReadOptions.scale_information``, or its default); None
+    if none were lifted."""
 
     def skipped_by_reason(self) -> list[tuple[str, int, int]]:
         """(reason, how many lines, the first one's number) of the skipped lines, most frequent
@@ -109,11 +119,13 @@ class _Collected:
     equivalences: list = dataclasses.field(default_factory=list)  # rows
 
 
-def _lift_se3_records(collected: _Collected, scale_information: float | None) -> None:
+def _lift_se3_records(collected: _Collected, scale_information: float | None) -> float | None:
     """Turn SE3 vertices, edges and priors into Sim3 ones of scale 1 (CONVENTIONS.md: both
-    files' vertices are world-from-node, so no inversion is involved)."""
+    files' vertices are world-from-node, so no inversion is involved); returns the log-scale
+    information of the lifted edges and priors, None if there were none."""
+    se3_edges = [(z, info) for _, z, info in collected.edges if isinstance(z, SE3)]
+    lifted = se3_edges or any(isinstance(z, SE3) for _, z, _ in collected.priors)
     if scale_information is None:
-        se3_edges = [(z, info) for _, z, info in collected.edges if isinstance(z, SE3)]
         scale_information = default_scale_information(
             np.concatenate([info for _, info in se3_edges]) if se3_edges else np.zeros((0, 6, 6)),
             SE3.concatenate([z for z, _ in se3_edges]) if se3_edges else SE3.identity((0,)),
@@ -133,6 +145,7 @@ def _lift_se3_records(collected: _Collected, scale_information: float | None) ->
                 for rows, z, info in getattr(collected, kind)
             ],
         )
+    return scale_information if lifted else None
 
 
 def _edge2_order_advice(rows: Rows, order: str) -> str:
@@ -335,8 +348,9 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
             _convert(spec, rows, options, checker, collected)
     _apply_prior_offsets(collected, checker)
 
+    lifted_scale_information = None
     if group is Sim3:
-        _lift_se3_records(collected, options.scale_information)
+        lifted_scale_information = _lift_se3_records(collected, options.scale_information)
     graph, without_vertex = _assemble(group, collected, checker)
     tag_counts = Counter()
     for rows, *_ in collected.vertices + collected.edges + collected.priors:
@@ -349,7 +363,14 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
         sim3_dialect = "a" if widths & {9, 38} else "b"
     file_format = "toro" if any(t in TORO_TAGS for t in lines_by_tag) else "g2o"
     return ReadResult(
-        graph, path, file_format, dict(tag_counts), checker.skipped, without_vertex, sim3_dialect
+        graph,
+        path,
+        file_format,
+        dict(tag_counts),
+        checker.skipped,
+        without_vertex,
+        sim3_dialect,
+        lifted_scale_information,
     )
 
 
