@@ -223,7 +223,7 @@ def _search(graph, mask, width_sq, options, run: _Run) -> tuple[np.ndarray, Resu
     least_squares = dataclasses.replace(options, relative_decrease=STAGE_RELATIVE_DECREASE)
     start = run.solve(graph, least_squares, "least squares")
     best, best_objective = None, np.inf
-    for restart in (False, True) if supports_chordal(graph.group) else (False,):
+    for restart in _starts(graph):
         result, weights = _stages(graph, mask, width_sq, options, start, restart, run)
         objective = tls_objective(graph, result.values, mask, width_sq)
         if best is None or objective < best_objective:  # the first, even if not finite
@@ -247,6 +247,12 @@ def _search(graph, mask, width_sq, options, run: _Run) -> tuple[np.ndarray, Resu
         if not changed:
             break
     return kept, result
+
+
+def _starts(graph: PoseGraph) -> tuple[bool, ...]:
+    """The starts a GNC step is solved from: warm (False), and from the chordal relaxation
+    (True) where the group has one."""
+    return (False, True) if supports_chordal(graph.group) else (False,)
 
 
 def _leverage(graph, kept, result, options) -> Leverage:
@@ -282,7 +288,7 @@ def _settle_best(graph, mask, kept, values, width_sq, options, run: _Run):
     re-admitted together can pull a region out of the basin that the values lie in (a
     monocular sequence with 20 loops back: 16 m ATE from the values, 1.6 m from chordal)."""
     best = None
-    for restart in (False, True) if supports_chordal(graph.group) else (False,):
+    for restart in _starts(graph):
         settled_kept, settled = _settle(graph, mask, kept, values, width_sq, options, run, restart)
         objective = tls_objective(graph, settled.values, mask, width_sq)
         if best is None or objective < best[2]:
