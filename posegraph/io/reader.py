@@ -97,8 +97,8 @@ class ReadResult:
         return [(why, count, first_line[why]) for why, count in counts.most_common()]
 
     def skipped_report(self, reasons: int = 3) -> str:
-        """ "N line(s) skipped: k × reason (first at line L); …", naming the ``reasons`` most
-        frequent reasons."""
+        """The report "N line(s) skipped: k × reason (first at line L); …" of the skipped lines,
+        naming the ``reasons`` most frequent reasons."""
         grouped = self.skipped_by_reason()
         named = "; ".join(
             f"{count} × {why} (first at line {line})" for why, count, line in grouped[:reasons]
@@ -124,7 +124,7 @@ def _lift_se3_records(collected: _Collected, scale_information: float | None) ->
     files' vertices are world-from-node, so no inversion is involved); returns the log-scale
     information of the lifted edges and priors, None if there were none."""
     se3_edges = [(z, info) for _, z, info in collected.edges if isinstance(z, SE3)]
-    lifted = se3_edges or any(isinstance(z, SE3) for _, z, _ in collected.priors)
+    lifted = bool(se3_edges) or any(isinstance(z, SE3) for _, z, _ in collected.priors)
     if scale_information is None:
         scale_information = default_scale_information(
             np.concatenate([info for _, info in se3_edges]) if se3_edges else np.zeros((0, 6, 6)),
