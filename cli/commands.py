@@ -302,7 +302,9 @@ def scale_drift(args: argparse.Namespace) -> int:
         if written in ("tum", "kitti"):
             write_trajectory(after, args.output, written)
         else:
-            convert_graph(correction.graph, args.output, written)
+            convert_graph(
+                correction.graph, args.output, written, sim3_dialect=read.sim3_dialect or "a"
+            )
     ate = None
     if truth is not None:
         ate = tuple(evaluate(poses, truth, "se3").ate.rmse for poses in (before, corrected))

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from posegraph_cli.schema import SCHEMAS
 from posegraph_datasets import example
+from posegraph_datasets.monocular import monocular_sequence, write_sequence
 from posegraph_datasets.outliers import add_false_loops
 from posegraph_datasets.paths import BENCHMARK_GRAPHS
 
@@ -142,8 +143,6 @@ def test_covariances_that_do_not_exist_are_refused_and_nothing_is_written(tmp_pa
 def monocular_file(tmp_path, false_loops: float = 0.0) -> tuple[str, str, np.ndarray]:
     """A generated monocular sequence (1% scale drift, seed 1) as a g2o file, with that share of
     false Sim3 loop closures; (its path, its ground truth's path, the false edges' indices)."""
-    from posegraph_datasets.monocular import monocular_sequence, write_sequence
-
     source, truth = tmp_path / "mono.g2o", tmp_path / "gt.tum"
     sequence = monocular_sequence(drift=0.01, seed=1)
     write_sequence(sequence, str(source), str(truth))
@@ -635,6 +634,12 @@ def test_scale_drift_command(tmp_path):
     camera_from_world = tmp_path / "cw.tum"
     run("scale-drift", source, "-o", camera_from_world, "--convention", "camera_from_world")
     assert not np.allclose(np.loadtxt(camera_from_world)[:, 1:4], corrected[:, 1:4])
+    # The optimised Sim3 graph is written in the input's dialect, as optimize writes it.
+    for dialect in ("a", "b"):
+        write_sequence(monocular_sequence(drift=0.01, seed=1), source, truth, dialect=dialect)
+        graph_out = tmp_path / f"corrected_{dialect}.g2o"
+        run("scale-drift", source, "-o", graph_out)
+        assert read_graph(str(graph_out)).sim3_dialect == dialect
 
 
 def test_scale_drift_command_rejects_false_loops(tmp_path):
@@ -661,8 +666,6 @@ def test_reports_give_the_scale_information_of_lifted_se3_odometry(tmp_path):
     run rejects most loops, the report says it may be too stiff, and setting it as the hint says
     keeps every loop. (At 2% drift per keyframe the default makes GNC reject all 20 true loops:
     stop 29's scale-drift table.)"""
-    from posegraph_datasets.monocular import monocular_sequence, write_sequence
-
     from posegraph.lifting import default_scale_information
 
     source, truth = tmp_path / "mono.g2o", tmp_path / "gt.tum"
