@@ -68,7 +68,9 @@ def _parser() -> argparse.ArgumentParser:
     common.add_argument("--debug", action="store_true", help="show tracebacks")
     reading = argparse.ArgumentParser(add_help=False)
     reading.add_argument(
-        "--lenient", action="store_true", help="skip bad lines instead of stopping"
+        "--lenient",
+        action="store_true",
+        help="skip bad lines instead of stopping (a warning, or skipped_lines in --json, lists them)",
     )
     reading.add_argument(
         "--g2o-rotation-information",
