@@ -159,6 +159,7 @@ def optimize(args: argparse.Namespace) -> int:
         "group": graph.group.__name__,
         "nodes": graph.num_nodes,
         "edges": graph.num_edges,
+        "lifted_scale_information": read.lifted_scale_information,
         "summary": summary.as_dict(),
         "skipped_lines": inputs.skipped_lines,
     }

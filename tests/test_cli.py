@@ -676,6 +676,8 @@ def test_reports_give_the_scale_information_of_lifted_se3_odometry(tmp_path):
     assert run_json("info", source)["lifted_scale_information"] == pytest.approx(default, rel=1e-9)
     assert run_json("info", source, "--scale-information", 2500)["lifted_scale_information"] == 2500
     assert run_json("info", EXAMPLE)["lifted_scale_information"] is None  # SE3 lines only
+    optimized = run_json("optimize", source, "--scale-information", 2500)
+    assert optimized["lifted_scale_information"] == 2500
     sigma = f"{100 / np.sqrt(default):.2g}%"
     assert f"a scale change of {sigma} per edge" in run("info", source).stdout
 
