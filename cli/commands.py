@@ -38,12 +38,12 @@ def _options(args: argparse.Namespace) -> ReadOptions:
 
 class _Inputs:
     """A command's input files, read with its options. What lenient reading skipped is kept for
-    the JSON document (``skipped_lines``) and, with ``warn`` in text mode, reported on stderr
-    as soon as it is read: the results leave those lines out."""
+    the JSON document (``skipped_lines``) and, with ``warn_skipped`` in text mode, reported on
+    stderr as soon as it is read: the results leave those lines out."""
 
-    def __init__(self, args: argparse.Namespace, warn: bool = True) -> None:
+    def __init__(self, args: argparse.Namespace, warn_skipped: bool = True) -> None:
         self.options = _options(args)
-        self.warn = warn and not (args.json or args.quiet)
+        self.warn_skipped = warn_skipped and not (args.json or args.quiet)
         self.skipped_lines: list[dict] = []
 
     def graph(self, path: str) -> ReadResult:
@@ -52,7 +52,7 @@ class _Inputs:
             {"path": path, "reason": why, "count": count, "first_line": line}
             for why, count, line in read.skipped_by_reason()
         ]
-        if read.skipped and self.warn:
+        if read.skipped and self.warn_skipped:
             warn(f"{path}: {read.skipped_report()}; the results leave them out")
         return read
 
@@ -201,7 +201,7 @@ def _covariances(source: str, graph: posegraph.PoseGraph) -> np.ndarray:
 
 
 def info(args: argparse.Namespace) -> int:
-    inputs = _Inputs(args, warn=False)  # the report lists the skipped lines as a problem
+    inputs = _Inputs(args, warn_skipped=False)  # the report lists the skipped lines as a problem
     diagnosis = diagnose(inputs.graph(args.input))
     record = {"command": "info", **diagnosis.as_dict(), "skipped_lines": inputs.skipped_lines}
     _emit(args, record, format_diagnosis(diagnosis))
