@@ -13,7 +13,10 @@ graph optimization", §IV-B and §V).
 Any information matrix is accepted: the rotation weight wₑ is the mean eigenvalue of the
 rotation block of Ωₑ (its trace over d_rot), and the translation block Ω_tt is used whole.
 Every connected component is anchored (fixed nodes, a prior's measurement, or its lowest id at
-its current value), so disconnected graphs and degree-1 nodes need no special care.
+its current value), so disconnected graphs and degree-1 nodes need no special care. A node that
+no edge weighs in one of the three problems (its rotation, say, seen only by position-only
+edges) keeps the graph's value there: its row in that system is zero, and the solve's ridge
+(``BlockPattern.factorize_regularized``) leaves it at zero.
 """
 
 from __future__ import annotations
@@ -86,6 +89,15 @@ def chordal_values(graph: PoseGraph) -> LieGroup:
     weight, translation_information, scale_weight = _blocks(group, edges.information)
     held, held_values = _anchors(graph)
     held_rotation, held_translation, held_scale = _split(group, held_values)
+    start_rotation, start_translation, start_scale = _split(group, graph.values)
+
+    def kept(solved: np.ndarray, start: np.ndarray, weights: np.ndarray) -> np.ndarray:
+        """``solved`` (n, …), but ``start`` at the free nodes that no edge weighs (``weights``
+        (m,) ≥ 0, per edge)."""
+        unweighted = np.bincount(i, weights, n) + np.bincount(j, weights, n) == 0
+        unweighted[held] = False
+        return np.where(unweighted.reshape((n,) + (1,) * (solved.ndim - 1)), start, solved)
+
     block_of = free_block_index(n, held)
     no_priors = np.zeros(0, dtype=np.int64)
     pattern = BlockPattern(block_of, i, j, no_priors, d)
@@ -100,7 +112,7 @@ def chordal_values(graph: PoseGraph) -> LieGroup:
     blocks = np.concatenate([w * eye, w * eye, -w * z, -w * np.swapaxes(z, 1, 2)])
     pieces = np.concatenate([-w * (z @ np.swapaxes(r0, 1, 2)), w * np.swapaxes(r0, 1, 2)])
     rows += np.swapaxes(_solve(pattern, blocks, pieces), 1, 2)
-    rotation = project_to_rotation(rows)
+    rotation = kept(project_to_rotation(rows), start_rotation, weight)
     rotation[held] = held_rotation
 
     # Log-scales (Sim3): r = σⱼ − σᵢ − log sₑ, weighted by the σσ information (1 × 1 blocks).
@@ -112,6 +124,7 @@ def chordal_values(graph: PoseGraph) -> LieGroup:
         blocks = np.concatenate([w_s, w_s, -w_s, -w_s])
         pieces = np.concatenate([-w_s * r0, w_s * r0])
         log_scale += _solve(BlockPattern(block_of, i, j, no_priors, 1), blocks, pieces)[:, 0, 0]
+        log_scale = kept(log_scale, np.log(start_scale), scale_weight)
     scale = np.exp(log_scale)
 
     # Translations: r = tⱼ − tᵢ − sᵢ Rᵢ Δt with weight W = Rᵢ Ω_tt Rᵢᵀ / sᵢ² (the between
@@ -125,6 +138,8 @@ def chordal_values(graph: PoseGraph) -> LieGroup:
     weighted = np.einsum("mab,mb->ma", world, r0)[:, :, None]
     blocks = np.concatenate([world, world, -world, -world])
     translation += _solve(pattern, blocks, np.concatenate([-weighted, weighted]))[:, :, 0]
+    translation_weight = np.trace(translation_information, axis1=1, axis2=2)
+    translation = kept(translation, start_translation, translation_weight)
     if group is SE2:
         return SE2(np.arctan2(rotation[:, 1, 0], rotation[:, 0, 0]), translation)
     if group is Sim3:

@@ -211,14 +211,19 @@ class BlockPattern:
 
     def factorize_regularized(self, data: np.ndarray) -> None:
         """Factorise the matrix, or if it is not numerically positive definite (weights of
-        extreme range), the matrix plus the smallest ridge ε diag(H), ε in ``RIDGES``, that is.
-        For systems whose solution is an estimate (initial values, leverage), where the ridge's
-        change does not matter; raises ``NotPositiveDefinite`` if no ridge helps."""
+        extreme range, or directions that nothing measures), the matrix plus the smallest ridge
+        ε diag(H), ε in ``RIDGES``, that is. A zero of diag(H) is a direction that nothing
+        measures (its row and column are zero, H being positive semi-definite): its ridge is
+        that of H's largest diagonal entry, so that the solution is zero along it. For systems
+        whose solution is an estimate (initial values, leverage), where the ridge's change does
+        not matter; raises ``NotPositiveDefinite`` if no ridge helps."""
         try:
             self.factorize(data)
             return
         except NotPositiveDefinite:
             diagonal = self.diagonal(data)
+        largest = float(diagonal.max(initial=0.0))
+        diagonal = np.where(diagonal == 0, largest if 0 < largest < np.inf else 1.0, diagonal)
         for ridge in RIDGES:
             try:
                 self.factorize(data, ridge * diagonal)

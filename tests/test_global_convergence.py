@@ -85,6 +85,54 @@ def test_initialisers_accept_full_information_and_several_components(group, meth
     assert result.summary.converged
 
 
+def _with_partial_leaf(group, measured: str) -> tuple[PoseGraph, np.ndarray]:
+    """A loopy graph with a leaf node 9999 joined by one edge that measures only its position
+    (or only its rotation), and the mask of the leaf's tangent directions nothing measures."""
+    graph = random_graph(group, 15, 8, seed=68, noise=0.02)
+    d, dof = group.point_dim, group.dof
+    position = np.arange(dof) < d
+    kept = (
+        position
+        if measured == "position"
+        else (np.arange(dof) >= d) & (np.arange(dof) < dof - (group is Sim3))
+    )
+    information = np.diag(np.where(kept, 100.0, 0.0))
+    leaf = group.exp(np.random.default_rng(69).normal(size=(1, dof)))
+    graph.add_nodes([9999], leaf)
+    measurement = graph.values[3].between(leaf).retract(np.full((1, dof), 0.01))
+    graph.add_edges([graph.node_ids[3]], [9999], measurement, information[None])
+    return graph, ~kept
+
+
+@pytest.mark.parametrize("measured", ["position", "rotation"])
+@pytest.mark.parametrize("group", [SE2, SE3, Sim3], ids=lambda g: g.__name__)
+def test_a_node_with_directions_nothing_measures_is_optimised_from_every_start(group, measured):
+    """A leaf seen only by a position-only (or rotation-only) edge: chordal relaxation's
+    rotation (or translation) system had a zero row there, which no relative ridge ε diag(H)
+    could fix, and ``optimize`` with defaults failed (NotPositiveDefinite; the CLI's exit 3).
+    The leaf can always meet its one edge, so the optimum is that of the graph without it:
+    every initialiser and GNC now reach it, and chordal relaxation leaves the leaf's
+    unmeasured directions at their values."""
+    graph, _ = _with_partial_leaf(group, measured)
+    without_leaf = graph.subgraph(graph.node_ids != 9999)
+    best = posegraph.optimize(without_leaf, init="file").summary
+    assert best.converged
+    for init in ("auto", "odometry", "spanning-tree", "chordal"):
+        summary = posegraph.optimize(graph.copy(), init=init).summary
+        assert summary.converged, init
+        assert summary.final_error == pytest.approx(best.final_error, rel=1e-6), init
+    summary = posegraph.optimize(graph.copy(), robust="gnc").summary
+    assert summary.final_error == pytest.approx(best.final_error, rel=1e-6)
+    leaf, started = chordal_values(graph)[-1].as_matrix(), graph.values[-1].as_matrix()
+    d = group.point_dim
+    if measured == "position":  # the rotation (and Sim3's scale: s R) are not measured
+        np.testing.assert_allclose(leaf[:d, :d], started[:d, :d], atol=1e-12)
+    else:  # the translation (and Sim3's scale) are not measured
+        np.testing.assert_allclose(leaf[:d, d], started[:d, d], atol=1e-12)
+        if group is Sim3:
+            np.testing.assert_allclose(np.linalg.det(leaf[:d, :d]), np.linalg.det(started[:d, :d]))
+
+
 def test_auto_picks_chordal_for_loops_and_odometry_for_trees():
     loopy = random_graph(SE3, 10, 5, seed=63)
     tree = random_graph(SE3, 10, 0, seed=64)
