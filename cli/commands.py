@@ -193,7 +193,7 @@ def _note_interruption(progress: Progress, summary: Summary) -> None:
 def _covariances(source: str, graph: posegraph.PoseGraph) -> np.ndarray:
     """Every node's marginal covariance at the graph's values, before anything is written."""
     try:
-        return posegraph.marginals(graph, graph.node_ids)
+        return posegraph.marginals(graph, graph.node_ids, require_measured=True)
     except NotPositiveDefinite as error:
         raise UsageError(
             f"{source}: {error}. Nothing written (without --covariances, the optimised graph is)"

@@ -2,7 +2,7 @@
 
 It reports what a graph holds and every problem worth knowing before optimising it, each with
 a one-line suggestion: disconnected components, missing gauge, ill-conditioned or asymmetric
-information, duplicate edges, self-loops, breaks in the odometry chain, and lines skipped when
+information, nodes with directions nothing measures, duplicate edges, self-loops, breaks in the odometry chain, and lines skipped when
 reading leniently.
 """
 
@@ -15,6 +15,7 @@ import numpy as np
 from .factors import chi2
 from .initialization import odometry_mask
 from .io.reader import ReadResult
+from .observability import describe_unmeasured, unmeasured_directions
 
 CONDITION_LIMIT = 1e12
 
@@ -92,6 +93,17 @@ def diagnose(read: ReadResult) -> Diagnosis:
             Problem(
                 f"{singular_edges} edge(s) have singular information: directions they do not measure",
                 "fine for partial measurements, if the rest of the graph constrains those directions",
+            )
+        )
+    unmeasured = unmeasured_directions(graph)
+    if unmeasured.any():
+        problems.append(
+            Problem(
+                f"{np.count_nonzero(unmeasured)} node(s) have directions that no edge or prior"
+                f" measures ({describe_unmeasured(graph, unmeasured)})",
+                "the measurements reach them there only through the residuals' curvature, so"
+                " their values there are the initialisation's and their covariances mean nothing;"
+                " add measurements of those directions, or fix those nodes",
             )
         )
     condition = eigenvalues[~singular, -1] / eigenvalues[~singular, 0]

@@ -19,6 +19,7 @@ import numpy as np
 from .graph import PoseGraph
 from .lie import LieGroup
 from .linear import NormalEquations, factorized_information
+from .observability import singular_information, unmeasured_directions
 from .sparse_cholesky import NotPositiveDefinite, covariance_by_solves
 
 
@@ -48,6 +49,7 @@ def marginals(
     values: LieGroup | None = None,
     joint: bool = False,
     linear_solver: str = "auto",
+    require_measured: bool = False,
 ) -> np.ndarray:
     """Covariances of ``nodes`` (ids) at ``values`` (default: the graph's current values, which
     ``posegraph.optimize`` leaves at the optimum).
@@ -62,7 +64,11 @@ def marginals(
 
     Returns (k, d, d) marginal blocks, or with ``joint=True`` the (k·d, k·d) joint covariance of
     the nodes together (for a pair, the 2d × 2d matrix with their cross-covariance). Raises
-    ``NotPositiveDefinite`` if the information matrix is singular.
+    ``NotPositiveDefinite`` if the information matrix is singular, naming the nodes with
+    directions that no measurement reaches (``posegraph.observability``), if any. With
+    ``require_measured``, such nodes are refused even where H factorises (away from zero
+    residuals it can, and gives them covariances that mean nothing), at the cost of a pass over
+    all edges.
     """
     if values is None:
         graph.require_values("optimise the graph first (covariances are taken at its values)")
@@ -74,6 +80,8 @@ def marginals(
         edge_weights, prior_weights = graph.solution.weights_for(graph.edges, graph.priors)
         if np.any(edge_weights != 1.0) or np.any(prior_weights != 1.0):
             graph = graph.weighted(edge_weights, prior_weights)
+    if require_measured and unmeasured_directions(graph).any():
+        raise singular_information(graph)
     groups = index[None, :] if joint else index[:, None]
     # Solves serve any factor, so the last least-squares solve's normal equations do (a back
     # end reading its newest pose's covariance after each step); for selected inversion, new
@@ -87,10 +95,6 @@ def marginals(
     try:
         factorized_information(graph, values, system)
     except NotPositiveDefinite:
-        raise NotPositiveDefinite(
-            "the information matrix is singular: some direction of the free nodes is measured "
-            "by nothing (such as the rotation of a map held only by position priors), so its "
-            "covariance is unbounded"
-        ) from None
+        raise singular_information(graph) from None
     covariances = joint_covariances(system, groups)
     return covariances[0] if joint else covariances

@@ -140,6 +140,28 @@ def test_covariances_that_do_not_exist_are_refused_and_nothing_is_written(tmp_pa
     run("optimize", graph_file, "--covariances", graph_file, check_exit=2)  # never the input
 
 
+def test_nodes_with_directions_nothing_measures_are_named(tmp_path):
+    """A triangle and a leaf, node 3, seen by one position-only edge: its heading is measured
+    by nothing. ``optimize`` with defaults ended in an internal error (exit 3: chordal
+    relaxation's singular system); now it optimises, and ``info`` and the refusal of
+    covariances name the node."""
+    graph_file = tmp_path / "leaf.g2o"
+    full = "100 0 0 100 0 100"
+    graph_file.write_text(
+        "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 1.6\nVERTEX_SE2 2 1 1 3.1\nVERTEX_SE2 3 2 1 0.7\n"
+        f"EDGE_SE2 0 1 1 0 1.57 {full}\nEDGE_SE2 1 2 1 0 1.57 {full}\n"
+        f"EDGE_SE2 2 0 1.4 0.1 -2.3 {full}\nEDGE_SE2 1 3 1 -1 0 100 0 0 100 0 0\n"
+    )
+    named = (
+        "1 node(s) have directions that no edge or prior measures (node 3: 1 of its 3 directions)"
+    )
+    assert named in [p["what"] for p in run_json("info", graph_file)["problems"]]
+    optimized = run_json("optimize", graph_file)["summary"]
+    assert optimized["initialization"] == "chordal" and optimized["converged"]
+    completed = run("optimize", graph_file, "--covariances", tmp_path / "c.txt", check_exit=2)
+    assert "measured by nothing (node 3: 1 of its 3 directions)" in completed.stderr
+
+
 def monocular_file(tmp_path, false_loops: float = 0.0) -> tuple[str, str, np.ndarray]:
     """A generated monocular sequence (1% scale drift, seed 1) as a g2o file, with that share of
     false Sim3 loop closures; (its path, its ground truth's path, the false edges' indices)."""

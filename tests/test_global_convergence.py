@@ -20,7 +20,9 @@ from posegraph.gnc import gnc_tls
 from posegraph.graph import PoseGraph
 from posegraph.initialization import choose, initialize
 from posegraph.lie import SE2, SE3, Sim3
+from posegraph.observability import unmeasured_directions
 from posegraph.robust import KERNELS, RobustKernel, default_width, tls_gnc_weights
+from posegraph.sparse_cholesky import NotPositiveDefinite
 from posegraph.trajectory_io import Trajectory, as_se3
 
 from .conftest import city_with_fixes, gnss_track, random_graph, union
@@ -113,7 +115,10 @@ def test_a_node_with_directions_nothing_measures_is_optimised_from_every_start(g
     The leaf can always meet its one edge, so the optimum is that of the graph without it:
     every initialiser and GNC now reach it, and chordal relaxation leaves the leaf's
     unmeasured directions at their values."""
-    graph, _ = _with_partial_leaf(group, measured)
+    graph, unmeasured = _with_partial_leaf(group, measured)
+    expected = np.zeros(graph.num_nodes, dtype=int)
+    expected[-1] = np.count_nonzero(unmeasured)
+    np.testing.assert_array_equal(unmeasured_directions(graph), expected)
     without_leaf = graph.subgraph(graph.node_ids != 9999)
     best = posegraph.optimize(without_leaf, init="file").summary
     assert best.converged
@@ -131,6 +136,20 @@ def test_a_node_with_directions_nothing_measures_is_optimised_from_every_start(g
         np.testing.assert_allclose(leaf[:d, d], started[:d, d], atol=1e-12)
         if group is Sim3:
             np.testing.assert_allclose(np.linalg.det(leaf[:d, :d]), np.linalg.det(started[:d, :d]))
+
+
+def test_covariances_of_a_graph_with_an_unmeasured_direction_can_be_refused():
+    """A leaf of an SE2 graph seen by two position-only edges: where they disagree, the Log
+    couples its heading to its position at second order, so H factorises, and ``marginals``
+    gives the heading a variance that means nothing (over 1e5 rad² at the optimum). With
+    ``require_measured`` it names the leaf instead."""
+    graph, _ = _with_partial_leaf(SE2, "position")
+    measurement = graph.values[6].between(graph.values[-1]).retract(np.full((1, 3), -0.02))
+    graph.add_edges([graph.node_ids[6]], [9999], measurement, graph.edges.information[-1:])
+    posegraph.optimize(graph)
+    assert posegraph.marginals(graph, [9999])[0, 2, 2] > 1e5
+    with pytest.raises(NotPositiveDefinite, match=r"nothing \(node 9999: 1 of its 3 directions\)"):
+        posegraph.marginals(graph, [9999], require_measured=True)
 
 
 def test_auto_picks_chordal_for_loops_and_odometry_for_trees():
