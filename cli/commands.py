@@ -296,6 +296,10 @@ def scale_drift(args: argparse.Namespace) -> int:
         )
     summary = correction.result.summary
     _note_interruption(progress, summary)
+    # Lifted by the reader (a file mixing SE3 and Sim3) or by the correction (SE3 only).
+    lifted = read.lifted_scale_information
+    if lifted is None:
+        lifted = correction.lifted_scale_information
     after = Trajectory(correction.node_ids.astype(float), correction.poses)  # as asked for
     corrected = Trajectory.of_graph(correction.graph)  # world-from-camera
     if args.output:
@@ -326,14 +330,14 @@ def scale_drift(args: argparse.Namespace) -> int:
         "nodes": graph.num_nodes,
         "edges": graph.num_edges,
         "scale_range": [float(correction.scales.min()), float(correction.scales.max())],
-        "lifted_scale_information": read.lifted_scale_information,
+        "lifted_scale_information": lifted,
         "summary": summary.as_dict(),
         "ate_before": ate[0] if ate else None,
         "ate_after": ate[1] if ate else None,
         "skipped_lines": inputs.skipped_lines,
     }
     written = {"wrote": args.output, "plotted": args.plot}
-    text = format_scale_drift(args.input, correction, ate, written, read.lifted_scale_information)
+    text = format_scale_drift(args.input, correction, ate, written, lifted)
     _emit(args, record, text)
     return EXIT_OK if summary.converged else EXIT_NOT_CONVERGED
 

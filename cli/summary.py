@@ -48,7 +48,8 @@ def format_scale_drift(
 ) -> str:
     """The report of a scale-drift correction; ``ate``: the ATE (SE3-aligned) before and after,
     against ground truth, if given; ``written``: the files written, by what they hold;
-    ``lifted_scale_information``: that of the SE3 lines of a file mixing SE3 and Sim3."""
+    ``lifted_scale_information``: that of the SE3 lines lifted to Sim3, by the reader (a file
+    mixing SE3 and Sim3) or by the correction (SE3 lines only)."""
     summary, graph, scales = correction.result.summary, correction.graph, correction.scales
     lines = [
         f"{source}: {graph.num_nodes} poses, {graph.num_edges} edges, optimised in Sim3",
@@ -96,7 +97,7 @@ def _robust_lines(
 
 
 def _lifted_lines(scale_information: float | None) -> list[str]:
-    """How the SE3 lines of a file mixing SE3 and Sim3 were lifted; nothing if none were."""
+    """How SE3 lines were lifted to Sim3; nothing if none were."""
     if scale_information is None:
         return []
     return [

@@ -47,11 +47,7 @@ def lift_graph(graph: PoseGraph, scale_information: float | None = None) -> Pose
     fixed (and so fix the scale gauge)."""
     if graph.group is not SE3:
         raise ValueError(f"lift_graph takes an SE3 graph, not {graph.group.__name__}")
-    check_scale_information(scale_information)
-    if scale_information is None:
-        scale_information = default_scale_information(
-            graph.edges.information, graph.edges.measurements
-        )
+    scale_information = lifting_scale_information(graph, scale_information)
     lifted = PoseGraph(Sim3)
     lifted.add_nodes(graph.node_ids, lift_se3(graph.values))
     ids = graph.node_ids
@@ -71,6 +67,15 @@ def lift_graph(graph: PoseGraph, scale_information: float | None = None) -> Pose
     return lifted
 
 
+def lifting_scale_information(graph: PoseGraph, scale_information: float | None) -> float:
+    """The σ-information ``lift_graph`` gives an SE3 graph: ``scale_information`` (checked
+    positive and finite), or if None ``default_scale_information`` of its edges."""
+    check_scale_information(scale_information)
+    if scale_information is not None:
+        return scale_information
+    return default_scale_information(graph.edges.information, graph.edges.measurements)
+
+
 def convert_convention(poses: SE3, convention: str) -> SE3:
     """World-from-camera poses in ``convention``, or poses in ``convention`` as world-from-camera:
     T_c_w = T_w_c⁻¹ either way (the conversion is its own inverse)."""
@@ -87,7 +92,8 @@ def sim3_to_se3(values: Sim3, convention: str = "world_from_camera") -> SE3:
 @dataclasses.dataclass(frozen=True)
 class ScaleDriftCorrection:
     """The corrected trajectory (in the convention asked for), per-pose scales, the optimised
-    Sim3 graph and the optimisation result."""
+    Sim3 graph and the optimisation result; ``lifted_scale_information``, the σ-information
+    an SE3 graph was lifted with (None if the graph given was Sim3)."""
 
     poses: SE3
     scales: np.ndarray
@@ -95,6 +101,7 @@ class ScaleDriftCorrection:
     graph: PoseGraph
     result: Result
     convention: str
+    lifted_scale_information: float | None = None
 
 
 def correct_scale_drift(
@@ -108,9 +115,11 @@ def correct_scale_drift(
     robust_priors: bool = False,
     callback: Callback | None = None,
 ) -> ScaleDriftCorrection:
-    """Correct the scale drift of a graph: an SE3 graph is lifted first (then it needs
-    Sim3 loop closures added to gain anything); a Sim3 graph, such as a g2o file of SE3
-    odometry plus EDGE_SIM3 loops read by ``read_graph``, is optimised as it is.
+    """Correct the scale drift of a graph: an SE3 graph is lifted first, every edge with
+    log-scale information ``scale_information`` (``lifting_scale_information``; its loops then
+    say that both ends have one scale, which corrects drift only if their translations are
+    metric: add Sim3 loops with ``add_sim3_loops`` instead); a Sim3 graph, such as a g2o file of
+    SE3 odometry plus EDGE_SIM3 loops read by ``read_graph``, is optimised as it is.
 
     ``convention`` names how the returned ``poses`` are expressed. ``init`` is the initialisation
     (default "auto": chordal relaxation of rotations, log-scales and translations when the graph
@@ -120,7 +129,12 @@ def correct_scale_drift(
     rejected (``result.summary.rejected_edges``).
     """
     _check_convention(convention)
-    sim3 = lift_graph(graph, scale_information) if graph.group is SE3 else graph.copy()
+    lifted_with = None
+    if graph.group is SE3:
+        lifted_with = lifting_scale_information(graph, scale_information)
+        sim3 = lift_graph(graph, lifted_with)
+    else:
+        sim3 = graph.copy()
     if sim3.group is not Sim3:
         raise ValueError(
             f"scale-drift correction needs an SE3 or Sim3 graph, not {graph.group.__name__}"
@@ -142,6 +156,7 @@ def correct_scale_drift(
         graph=sim3,
         result=result,
         convention=convention,
+        lifted_scale_information=lifted_with,
     )
 
 

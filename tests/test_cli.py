@@ -700,6 +700,20 @@ def test_reports_give_the_scale_information_of_lifted_se3_odometry(tmp_path):
     assert run_json("info", EXAMPLE)["lifted_scale_information"] is None  # SE3 lines only
     optimized = run_json("optimize", source, "--scale-information", 2500)
     assert optimized["lifted_scale_information"] == 2500
+    # A file of SE3 lines only is lifted by the correction, not the reader; it said nothing.
+    edges = read_graph(EXAMPLE).graph.edges
+    weights = np.trace(edges.information[:, :3, :3], axis1=1, axis2=2) / 3
+    own = np.median(weights * (edges.measurements.translation**2).sum(axis=1))
+    corrected = run_json("scale-drift", EXAMPLE)
+    assert corrected["lifted_scale_information"] == pytest.approx(own, rel=1e-12)
+    assert (
+        run_json("scale-drift", EXAMPLE, "--scale-information", 50)["lifted_scale_information"]
+        == 50
+    )
+    assert (
+        "lifted          SE3 lines to Sim3: log-scale information"
+        in run("scale-drift", EXAMPLE).stdout
+    )
     sigma = f"{100 / np.sqrt(default):.2g}%"
     assert f"a scale change of {sigma} per edge" in run("info", source).stdout
 
