@@ -15,8 +15,8 @@ rotation block of Ωₑ (its trace over d_rot), and the translation block Ω_tt 
 Every connected component is anchored (fixed nodes, a prior's measurement, or its lowest id at
 its current value), so disconnected graphs and degree-1 nodes need no special care. A node that
 no edge weighs in one of the three problems (its rotation, say, seen only by position-only
-edges) keeps the graph's value there: its row in that system is zero, and the solve's ridge
-(``BlockPattern.factorize_regularized``) leaves it at zero.
+edges) has a zero row in that system, which the solve's ridge
+(``BlockPattern.factorize_regularized``) leaves at zero; it keeps the graph's value there.
 """
 
 from __future__ import annotations

@@ -42,8 +42,7 @@ def unmeasured_directions(graph: PoseGraph) -> np.ndarray:
     """How many of each node's d tangent directions no measurement reaches (0 for held nodes:
     the gauge, ``PoseGraph.gauge_nodes``)."""
     eigenvalues = np.linalg.eigvalsh(node_information(graph))
-    largest = eigenvalues[:, -1:] if graph.num_nodes else eigenvalues
-    counts = np.count_nonzero(eigenvalues <= SINGULAR * largest, axis=1)
+    counts = np.count_nonzero(eigenvalues <= SINGULAR * eigenvalues[:, -1:], axis=1)
     counts[graph.gauge_nodes()] = 0
     return counts
 
