@@ -300,7 +300,7 @@ def scale_drift(args: argparse.Namespace) -> int:
     lifted = read.lifted_scale_information
     if lifted is None:
         lifted = correction.lifted_scale_information
-    after = Trajectory(correction.node_ids.astype(float), correction.poses)  # as asked for
+    after = Trajectory.of_graph(correction.graph, correction.poses)  # as asked for
     corrected = Trajectory.of_graph(correction.graph)  # world-from-camera
     if args.output:
         written = output_format(args.output)

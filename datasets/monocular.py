@@ -58,8 +58,8 @@ class MonocularSequence:
     def ate(self, poses: SE3) -> float:
         """ATE RMSE of world-from-camera ``poses`` against the ground truth, SE3-aligned (no
         scale fitting)."""
-        keys = self.odometry.node_ids.astype(float)
-        return evaluate(Trajectory(keys, poses), Trajectory(keys, self.truth), "se3").ate.rmse
+        estimate, truth = (Trajectory.of_graph(self.odometry, p) for p in (poses, self.truth))
+        return evaluate(estimate, truth, "se3").ate.rmse
 
     def se3_graph(self) -> PoseGraph:
         """The odometry and the loops as SE3 (rotation and translation, scale dropped): what an
@@ -164,4 +164,4 @@ def write_sequence(
         dialect,
     )
     atomic_write_text(graph_path, format_g2o(sequence.odometry) + "\n".join(loops) + "\n")
-    write_trajectory(Trajectory(ids.astype(float), sequence.truth), truth_path, "tum")
+    write_trajectory(Trajectory.of_graph(sequence.odometry, sequence.truth), truth_path, "tum")

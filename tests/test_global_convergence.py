@@ -23,7 +23,7 @@ from posegraph.lie import SE2, SE3, Sim3
 from posegraph.observability import unmeasured_directions
 from posegraph.robust import KERNELS, RobustKernel, default_width, tls_gnc_weights
 from posegraph.sparse_cholesky import NotPositiveDefinite
-from posegraph.trajectory_io import Trajectory, as_se3
+from posegraph.trajectory_io import Trajectory
 
 from .conftest import city_with_fixes, gnss_track, random_graph, union
 
@@ -391,8 +391,7 @@ def test_gnc_readmits_the_true_loops_of_a_drifted_region(shared_dataset, monkeyp
     corrupted, false = add_false_loops(simulated, 0.3, seed=1)
 
     def error_against_truth(result):
-        ids = graph.node_ids.astype(float)
-        estimate, truth = Trajectory(ids, as_se3(result.values)), Trajectory(ids, as_se3(solution))
+        estimate, truth = (Trajectory.of_graph(graph, v) for v in (result.values, solution))
         return evaluate(estimate, truth).ate.rmse
 
     with_readmission = posegraph.optimize(corrupted.copy(), robust="gnc")
