@@ -30,6 +30,7 @@ from ..factors import (
 from ..graph import PoseGraph
 from ..lie import LieGroup
 from ..linear import NormalEquations
+from ..observability import describe_unmeasured, unmeasured_directions
 from ..sparse_cholesky import NotPositiveDefinite
 from .options import SolverOptions
 from .summary import IterationRecord, Result, Summary
@@ -220,10 +221,12 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
             termination = TIME_LIMIT
             break
         if options.damping == "diagonal":
-            scale = np.clip(diagonal, options.min_diagonal, options.max_diagonal)
+            floor = max(options.min_diagonal, options.min_relative_diagonal * diagonal.max())
+            scale = np.clip(diagonal, floor, options.max_diagonal)
         else:
             scale = np.ones_like(diagonal)
         damping = lam * scale if lm else None
+        singular = False
         try:
             system.factorize(data, damping)
             clock.lap("factorize")
@@ -232,7 +235,7 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
             step_ok = bool(np.all(np.isfinite(step)))
         except NotPositiveDefinite:
             clock.lap("factorize")
-            step, step_ok = np.zeros_like(gradient), False
+            step, step_ok, singular = np.zeros_like(gradient), False, True
 
         damping_share = (
             np.max(lam * scale / np.maximum(diagonal, options.min_diagonal)) if lm else 0.0
@@ -273,7 +276,11 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
             break
         if not accepted:
             if not lm:
-                termination = "step raised the error (Gauss-Newton)"
+                termination = (
+                    _singular_termination(graph)
+                    if singular
+                    else "step raised the error (Gauss-Newton)"
+                )
                 break
             if not np.isfinite(lam) or lam > options.max_diagonal:
                 termination = "damping exceeded its limit (no step lowers the error)"
@@ -298,3 +305,14 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
                 termination, converged = "predicted error decrease below tolerance", True
                 break
     return current, termination, converged
+
+
+def _singular_termination(graph: PoseGraph) -> str:
+    """Why Gauss-Newton stopped when H did not factorise, naming the nodes with directions that
+    no measurement reaches (``posegraph.observability``), if there are any."""
+    counts = unmeasured_directions(graph)
+    where = f" ({describe_unmeasured(graph, counts)})" if counts.any() else ""
+    return (
+        f"normal equations singular: some direction is measured by nothing{where};"
+        " Gauss-Newton does not damp it, Levenberg-Marquardt does"
+    )
