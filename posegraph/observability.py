@@ -54,7 +54,10 @@ def singular_information(graph: PoseGraph) -> NotPositiveDefinite:
     where = (
         describe_unmeasured(graph, counts)
         if counts.any()
-        else "such as the rotation of a map held only by position priors"
+        else (
+            "such as the rotation of a map held only by position priors, or of a part of it"
+            " joined to the rest only by position-only edges"
+        )
     )
     return NotPositiveDefinite(
         "the information matrix is singular: some direction of the free nodes is measured by"
