@@ -129,15 +129,14 @@ def test_limits_stop_the_run():
 
 def test_a_step_that_raises_the_error_is_rejected(shared_dataset):
     """On MIT, from the file's values, the first Gauss-Newton step overshoots: GN stops and
-    keeps the initial values; LM damps its steps and converges. (A rejected step raising λ:
-    ``test_non_finite_steps_are_rejected``.)"""
+    keeps the initial values; LM rejects such steps, raises λ and goes on."""
     graph = read_graph(shared_dataset("MIT.g2o")).graph
     gn = optimize(graph, SolverOptions(method="gn"))
     assert gn.summary.termination == "step raised the error (Gauss-Newton)"
     assert gn.summary.final_error == gn.summary.initial_error
     lm = optimize(graph)
+    assert any(not r.accepted for r in lm.summary.iterations)
     assert lm.summary.converged
-    assert lm.summary.final_error < 0.01 * gn.summary.final_error
 
 
 def test_non_finite_steps_are_rejected(monkeypatch):
@@ -177,8 +176,6 @@ def test_invalid_options_are_refused():
         SolverOptions(method="dogleg")
     with pytest.raises(ValueError, match="damping"):
         SolverOptions(damping="sometimes")
-    with pytest.raises(ValueError, match=r"min_relative_diagonal is in \[0, 1\], not 2"):
-        SolverOptions(min_relative_diagonal=2)
     with pytest.raises(ValueError, match="max_iterations must be ≥ 0"):
         SolverOptions(max_iterations=-1)
     with pytest.raises(ValueError, match="time_limit must be ≥ 0 seconds, not -1"):

@@ -221,8 +221,7 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
             termination = TIME_LIMIT
             break
         if options.damping == "diagonal":
-            floor = max(options.min_diagonal, options.min_relative_diagonal * diagonal.max())
-            scale = np.clip(diagonal, floor, options.max_diagonal)
+            scale = np.clip(diagonal, options.min_diagonal, options.max_diagonal)
         else:
             scale = np.ones_like(diagonal)
         damping = lam * scale if lm else None

@@ -23,12 +23,6 @@ class SolverOptions:
         damping: "diagonal" damps with λ·diag(H) (Marquardt, scale-invariant); "identity" with λ·I.
         initial_damping: λ at the start, relative to max diag(H) for "identity" damping.
         min_diagonal, max_diagonal: clamp diag(H) before using it as damping (as Ceres does).
-        min_relative_diagonal: clamp it below at this fraction of its largest entry too. Where
-            H is nearly singular, Marquardt's damped step is the shortest in the metric diag(H),
-            so it runs along the directions whose diagonal is smallest: an SE3 pose seen only
-            by a position-only edge (its rotation's diagonal 1e-5 of the largest) took steps of
-            norm 9 that were rejected, and did not converge in 100 iterations. The floor bounds
-            the metric's spread; with it, 3 iterations.
         linear_solver: "auto", "cholmod" or "scipy" (see ``posegraph.sparse_cholesky``).
     """
 
@@ -41,7 +35,6 @@ class SolverOptions:
     damping: str = "diagonal"
     initial_damping: float = 1e-10
     min_diagonal: float = 1e-6
-    min_relative_diagonal: float = 1e-4
     max_diagonal: float = 1e32
     linear_solver: str = "auto"
 
@@ -50,10 +43,6 @@ class SolverOptions:
             raise ValueError(f"method is 'lm' or 'gn', not {self.method!r}")
         if self.damping not in ("diagonal", "identity"):
             raise ValueError(f"damping is 'diagonal' or 'identity', not {self.damping!r}")
-        if not 0 <= self.min_relative_diagonal <= 1:
-            raise ValueError(
-                f"min_relative_diagonal is in [0, 1], not {self.min_relative_diagonal}"
-            )
         if self.max_iterations < 0:
             raise ValueError("max_iterations must be ≥ 0")
         if self.time_limit is not None and not self.time_limit >= 0:
