@@ -163,24 +163,6 @@ def test_covariances_of_a_graph_with_an_unmeasured_direction_can_be_refused():
         posegraph.marginals(graph, [9999], require_measured=True)
 
 
-def test_covariances_of_two_maps_joined_by_a_position_only_edge_are_refused_with_the_cause():
-    """Two SE2 maps joined only by a position-only edge: the second turns about it freely,
-    though every node's own block of H is full rank. Where the edge is met, H is singular,
-    and the error gives that cause."""
-    graph = union(
-        random_graph(SE2, 8, 4, seed=1, noise=0.02),
-        random_graph(SE2, 8, 4, seed=2, noise=0.02),
-        100,
-    )
-    measurement = graph.values[3].between(graph.values[8])
-    joined = graph.node_ids[[3, 8]]  # a node of each map
-    graph.add_edges(joined[:1], joined[1:], measurement, np.diag([100.0, 100.0, 0.0])[None])
-    assert posegraph.optimize(graph).summary.converged
-    assert not unmeasured_directions(graph).any()
-    with pytest.raises(NotPositiveDefinite, match="joined to the rest only by position-only edges"):
-        posegraph.marginals(graph, graph.node_ids[-1:])
-
-
 def test_auto_picks_chordal_for_loops_and_odometry_for_trees():
     loopy = random_graph(SE3, 10, 5, seed=63)
     tree = random_graph(SE3, 10, 0, seed=64)
