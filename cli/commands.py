@@ -278,6 +278,13 @@ def eval(args: argparse.Namespace) -> int:  # noqa: A001 - the subcommand's name
     return EXIT_OK
 
 
+NO_SIM3_EDGE = (
+    "no Sim3 edge: each loop closure only says that its ends share one scale, which corrects"
+    " scale drift only where its translation is metric; Sim3 loop closures (EDGE_SIM3:EXPMAP)"
+    " carry the scale change"
+)
+
+
 def scale_drift(args: argparse.Namespace) -> int:
     from posegraph.scale_drift import correct_scale_drift
     from posegraph.trajectory_io import write_trajectory
@@ -288,6 +295,8 @@ def scale_drift(args: argparse.Namespace) -> int:
     inputs = _Inputs(args)
     read = inputs.graph(args.input)
     graph = read.graph
+    if graph.group is posegraph.SE3 and not (args.json or args.quiet):
+        warn(f"{args.input}: {NO_SIM3_EDGE}")
     truth = inputs.trajectory(args.gt) if args.gt else None  # read before the work
     before = Trajectory.of_graph(graph)
     with Progress(enabled=not (args.quiet or args.json)) as progress:

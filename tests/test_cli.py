@@ -682,6 +682,16 @@ def test_scale_drift_command_rejects_false_loops(tmp_path):
     assert "robust          gnc:" in text and "on 29 of 328 edges: 9 edge(s) rejected: " in text
 
 
+def test_scale_drift_warns_that_a_file_of_se3_edges_only_carries_no_scale_change(tmp_path):
+    warning = "no Sim3 edge: each loop closure only says that its ends share one scale"
+    se3_only = run("scale-drift", EXAMPLE)
+    assert f"posegraph: warning: {EXAMPLE}: {warning}" in se3_only.stderr
+    assert warning not in run("scale-drift", EXAMPLE, "--json").stderr
+    source, truth = tmp_path / "mono.g2o", tmp_path / "gt.tum"
+    write_sequence(monocular_sequence(drift=0.01, seed=1), str(source), str(truth))
+    assert "warning" not in run("scale-drift", source).stderr
+
+
 def test_reports_give_the_scale_information_of_lifted_se3_odometry(tmp_path):
     """The SE3 odometry of a file with Sim3 loops is lifted to Sim3 with some log-scale
     information: info and scale-drift report it, with the scale change it allows. When a robust
