@@ -43,7 +43,7 @@ class _Inputs:
 
     def __init__(self, args: argparse.Namespace, warn_skipped: bool = True) -> None:
         self.options = _options(args)
-        self.warn_skipped = warn_skipped and not (args.json or args.quiet)
+        self.warn_skipped = warn_skipped and _talks(args)
         self.skipped_lines: list[dict] = []
 
     def graph(self, path: str) -> ReadResult:
@@ -69,6 +69,12 @@ def _json_safe(value):
     if isinstance(value, list | tuple):
         return [_json_safe(item) for item in value]
     return value
+
+
+def _talks(args: argparse.Namespace) -> bool:
+    """Whether the command reports as text on the terminal: neither ``--json`` nor ``--quiet``
+    (progress and warnings are shown then)."""
+    return not (args.json or args.quiet)
 
 
 def _emit(args: argparse.Namespace, record: dict, text: str) -> None:
@@ -121,7 +127,7 @@ def optimize(args: argparse.Namespace) -> int:
         except KeyError as error:
             raise UsageError(f"--fix: {error.args[0]}") from None
     before = graph.copy()
-    with Progress(enabled=not (args.quiet or args.json)) as progress:
+    with Progress(enabled=_talks(args)) as progress:
         result = posegraph.optimize(graph, callback=progress, **_solving(args))
     summary = result.summary
     _note_interruption(progress, summary)
@@ -295,11 +301,11 @@ def scale_drift(args: argparse.Namespace) -> int:
     inputs = _Inputs(args)
     read = inputs.graph(args.input)
     graph = read.graph
-    if graph.group is posegraph.SE3 and not (args.json or args.quiet):
+    if graph.group is posegraph.SE3 and _talks(args):
         warn(f"{args.input}: {NO_SIM3_EDGE}")
     truth = inputs.trajectory(args.gt) if args.gt else None  # read before the work
     before = Trajectory.of_graph(graph)
-    with Progress(enabled=not (args.quiet or args.json)) as progress:
+    with Progress(enabled=_talks(args)) as progress:
         correction = correct_scale_drift(
             graph, args.scale_information, args.convention, callback=progress, **_solving(args)
         )
@@ -359,7 +365,7 @@ def bench(args: argparse.Namespace) -> int:
         files = [f for f in files if f.stem in args.graphs]
     if not files:
         raise UsageError("no benchmark graphs found (../shared/datasets or gtsam's Data/)")
-    table = run(files, args.repeats, args.rounds, args.budget, echo=not (args.quiet or args.json))
+    table = run(files, args.repeats, args.rounds, args.budget, echo=_talks(args))
     if args.json:
         print(json.dumps({"command": "bench", "table": table}, indent=2))
     elif not args.quiet:
