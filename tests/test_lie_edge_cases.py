@@ -198,3 +198,19 @@ def test_integral_of_exp_matches_van_loans_block_exponential():
     np.testing.assert_array_equal(integral_of_exp(np.zeros((3, 3))), np.eye(3))
     with np.errstate(invalid="ignore"):  # inf · 0 in the products
         assert not np.isfinite(integral_of_exp(np.full((2, 2), np.inf))).any()
+
+
+@pytest.mark.parametrize("norm", [1e-9, 1e-3, 0.05, 0.3])
+def test_integral_of_exp_sums_as_many_terms_as_the_largest_matrix_of_the_batch_needs(norm):
+    """A batch of small matrices takes fewer Taylor terms than one with a large matrix in it
+    (which is scaled, and sets the most terms): the two agree to rounding, and both agree with
+    Van Loan's block exponential."""
+    rng = np.random.default_rng(12)
+    small = rng.normal(size=(5, 7, 7))
+    small *= norm / np.abs(small).sum(axis=1).max(axis=1)[:, None, None]
+    large = 40.0 * rng.normal(size=(1, 7, 7))
+    alone, mixed = integral_of_exp(small), integral_of_exp(np.concatenate([small, large]))[:5]
+    np.testing.assert_allclose(alone, mixed, rtol=0, atol=4e-16)
+    block = np.zeros((5, 14, 14))
+    block[:, :7, :7], block[:, :7, 7:] = small, np.eye(7)
+    np.testing.assert_allclose(alone, scipy.linalg.expm(block)[:, :7, 7:], rtol=0, atol=1e-14)

@@ -44,6 +44,17 @@ _MOMENT_WEIGHTS = [(-1.0) ** ((k - 1) // 2) / factorial(k) for k in range(_MOMEN
 """(−1)ʲ/k! for k = 2j+1 and k = 2j+2: the weight of θ²ʲ m_k in b (k odd) and in c (k even)."""
 
 
+def _sigma_terms(largest: float) -> int:
+    """The terms of m_K's series in σ that |σ| ≤ ``largest`` (< 8) needs: up to the first
+    σⁿ/n! below 1e-20, as ``_SIGMA_TERMS`` is for |σ| < 8."""
+    term = 1.0
+    for n in range(1, _SIGMA_TERMS):
+        term *= largest / n
+        if term < 1e-20:
+            return n
+    return _SIGMA_TERMS
+
+
 def _small_angle_coefficients(sigma: np.ndarray, theta: np.ndarray) -> tuple[np.ndarray, ...]:
     """(b, c) for θ < 0.5 from their series b = Σⱼ (−1)ʲ θ²ʲ m_{2j+1}(σ)/(2j+1)! and
     c = Σⱼ (−1)ʲ θ²ʲ m_{2j+2}(σ)/(2j+2)!, j < ``_THETA_TERMS``, in the moments
@@ -58,7 +69,7 @@ def _small_angle_coefficients(sigma: np.ndarray, theta: np.ndarray) -> tuple[np.
     s = np.where(below, sigma, 0.0)
     e = np.exp(s)
     moment = np.zeros_like(s)
-    for coefficient in _TOP_MOMENT_SERIES[::-1]:
+    for coefficient in _TOP_MOMENT_SERIES[_sigma_terms(np.abs(s).max(initial=0.0)) - 1 :: -1]:
         moment = moment * s + coefficient
     b, c = np.zeros_like(s), np.zeros_like(s)
     for k in range(_MOMENTS, 0, -1):  # Horner in θ², from the highest power down
