@@ -91,3 +91,19 @@ def test_g2o_chi2_agrees(graph):
             edge.compute_error()
             total += edge.chi2()
         assert total == pytest.approx(chi2(values, graph.edges, graph.priors), rel=1e-6)
+
+
+def test_the_scale_drift_benchmark_runs_gtsam_on_the_same_graph():
+    """``python -m posegraph.benchmarks.scale_drift --gtsam`` on one sequence of 60 keyframes:
+    gtsam's final error (from the dead-reckoning values) is posegraph's to 1e-4 relative and
+    not below it, and the time ratio is that of the two times in the row."""
+    from posegraph.benchmarks import scale_drift
+
+    header, _, row = str(scale_drift.run([0.01], [0], gtsam=True, poses=60)).splitlines()
+    names = (name.strip() for name in header.strip("|").split("|"))
+    cells = dict(zip(names, row.strip("|").split("|"), strict=True))
+    ours, theirs = float(cells["error"]), float(cells["gtsam error"])
+    assert theirs >= ours * (1 - 1e-9)
+    assert theirs == pytest.approx(ours, rel=1e-4)
+    ratio = float(cells["posegraph (ms)"]) / float(cells["gtsam (ms)"])
+    assert float(cells["time ratio"]) == pytest.approx(ratio, rel=0.05, abs=0.01)
