@@ -2,19 +2,24 @@
 
 from __future__ import annotations
 
+import functools
+from decimal import Decimal, localcontext
+from math import factorial
+
 import numpy as np
 import pytest
 import scipy.linalg
 
 from posegraph.lie import SE2, SE3, SO2, SO3, LieGroup, Sim3
 from posegraph.lie.base import integral_of_exp
+from posegraph.lie.sim3 import _moments, w_derivatives
 from posegraph.lie.so3 import project_to_rotation
 
 from .helpers import assert_same_element, numerical_jacobian
 
-# Either side of the coefficients' switch to series, at θ = 0.1 and 0.5, too.
-ANGLES = [0.0, 1e-8, 1e-4, 0.099, 0.101, 0.499, 0.501, np.pi - 1e-6, np.pi]
-LOG_SCALES = [0.0, 1e-8, -1e-8, 3.0, -3.0, 9.0, -9.0]  # |σ| ≥ 8: Sim3's moments by recurrence
+# Either side of the coefficients' switches to series, at θ = 0.1, 0.5 and 1 (Sim3), too.
+ANGLES = [0.0, 1e-8, 1e-4, 0.099, 0.101, 0.499, 0.501, 0.999, 1.001, np.pi - 1e-6, np.pi]
+LOG_SCALES = [0.0, 1e-8, -1e-8, 3.0, -3.0, 9.0, -9.0, 25.0, -25.0]  # |σ| ≥ 20: by recurrence
 AXIS = np.array([0.48, -0.6, 0.64])  # unit length
 
 
@@ -63,7 +68,10 @@ def test_jacobians_at_hard_angles(group, angle, log_scale):
     numeric = numerical_jacobian(
         group.exp, tangent, group.dof, input_on_group=False, output_on_group=True
     )
-    np.testing.assert_allclose(group.jr(tangent), numeric, atol=1e-6)
+    # Central differences are good to about 1e-6 of the largest entry (e^|σ| for Sim3).
+    np.testing.assert_allclose(
+        group.jr(tangent), numeric, atol=1e-6 * max(1.0, np.abs(exact).max())
+    )
 
 
 @pytest.mark.parametrize("angle", [1e-8, 1e-4, 0.3, np.pi - 1e-6])
@@ -183,6 +191,85 @@ def test_sim3_from_general_homogeneous_matrix():
     s = Sim3.sample(np.random.default_rng(7))
     eade = s.as_matrix() / s.scale
     assert_same_element(Sim3.from_matrix(eade), s, atol=1e-13)
+
+
+DIGITS = 700  # m_k(σ) by parts loses about k·|log₁₀ σ| digits to cancellation
+
+
+@functools.cache
+def _exact_moments(sigma: float, count: int) -> tuple[Decimal, ...]:
+    """m_k(σ) = ∫₀¹ e^{σu} uᵏ du for k < count, integrated by parts in ``DIGITS`` digits:
+    e^σ Σ_{j≤k} (−1)ʲ k!/((k − j)! σ^{j+1}) − (−1)ᵏ k!/σ^{k+1} (1/(k + 1) at σ = 0)."""
+    with localcontext() as context:
+        context.prec = DIGITS
+        s = Decimal(sigma)
+        if s == 0:
+            return tuple(Decimal(1) / (k + 1) for k in range(count))
+        e = s.exp()
+        return tuple(
+            e
+            * sum(
+                (-1) ** j * Decimal(factorial(k) // factorial(k - j)) / s ** (j + 1)
+                for j in range(k + 1)
+            )
+            - (-1) ** k * Decimal(factorial(k)) / s ** (k + 1)
+            for k in range(count)
+        )
+
+
+@pytest.mark.parametrize(
+    "sigma", [-40.0, -20.0, -19.99, -7.9, -0.5, -1e-7, 0.0, 1e-7, 2.0, 7.9, 19.99, 20.0, 40.0]
+)
+def test_sim3_moments_match_exact_references(sigma):
+    """Every moment Sim3's series use, by its own series (Kummer's form for σ < 0) below
+    |σ| = 20 and by recurrence above, to 2e-15 relative."""
+    exact = np.array([float(m) for m in _exact_moments(sigma, 25)])
+    np.testing.assert_allclose(_moments(np.array([sigma]), 24)[:, 0], exact, rtol=2e-15, atol=0)
+
+
+@pytest.mark.parametrize("sigma", [-7.9, -1.0, 0.0, 1e-7, 2.5, 7.9, 25.0])
+@pytest.mark.parametrize("angle", [0.0, 1e-7, 0.3, 0.999, 1.001, 2.0, np.pi - 1e-6])
+def test_sim3_w_coefficients_and_derivatives_match_exact_references(sigma, angle):
+    """a, b, c of W and their derivatives (``w_derivatives``) against their series in θ² summed
+    in ``DIGITS`` digits on exact moments: to 3e-15 relative below θ = 1 (series), and 1e-13
+    above (closed forms, which lose up to two digits in (∂c/∂θ)/θ for σ < 0)."""
+    moments = _exact_moments(sigma, 60)
+    with localcontext() as context:
+        context.prec = DIGITS
+        t2 = Decimal(angle) ** 2
+
+        def series(first: int, weight) -> float:
+            powers = [t2**j if j else Decimal(1) for j in range(28)]  # Decimal refuses 0⁰
+            return float(sum(weight(j) * powers[j] * moments[first + 2 * j] for j in range(28)))
+
+        def alternating(offset: int):
+            return lambda j: Decimal((-1) ** j) / factorial(2 * j + offset)
+
+        def derivative(offset: int):
+            return lambda j: Decimal((-1) ** (j + 1) * 2 * (j + 1)) / factorial(2 * j + 2 + offset)
+
+        exact = [
+            float(moments[0]),
+            series(1, alternating(1)),
+            series(2, alternating(2)),
+            float(moments[1]),
+            series(2, alternating(1)),
+            series(3, alternating(2)),
+            series(3, derivative(1)),
+            series(4, derivative(2)),
+        ]
+    computed = [value.item() for value in w_derivatives(sigma, angle)]
+    np.testing.assert_allclose(computed, exact, rtol=3e-15 if angle < 1.0 else 1e-13, atol=0)
+
+
+def test_sim3_series_take_the_terms_the_largest_value_of_the_batch_needs():
+    """W's series take as many terms in θ² and σ as the batch's largest θ and |σ| need: each
+    element of a mixed batch equals the element evaluated alone (with its own, fewer terms)."""
+    sigma = np.array([1e-9, -0.3, 0.02, -7.9, 5.0, 19.0])
+    theta = np.array([0.95, 1e-9, 0.01, 0.2, 1e-4, 0.6])
+    batch = np.array(w_derivatives(sigma, theta))
+    alone = np.array([w_derivatives(s, t) for s, t in zip(sigma, theta, strict=True)]).T
+    np.testing.assert_allclose(batch, alone, rtol=1e-15, atol=0)
 
 
 def test_integral_of_exp_matches_van_loans_block_exponential():

@@ -5,8 +5,14 @@ Eade's Sim(3) (§6) under the isomorphism t = s·t_E, with (u, ω, λ) = (ρ, φ
 
 Exp (Eade §6.2): R = Exp(φ), s = e^σ, t = W ρ with W = ∫₀¹ e^{σu} Exp(uφ) du = a I + b φ× + c φ×²:
     a = ∫₀¹ e^{σu} du,  b = ∫₀¹ e^{σu} sin(uθ)/θ du,  c = ∫₀¹ e^{σu} (1 − cos uθ)/θ² du.
-For θ ≥ 0.5 they are evaluated in closed form; below, by their series in θ, whose terms are the
-moments m_k(σ) = ∫₀¹ e^{σu} u^k du. The right Jacobian is the base class's exact integral.
+For θ ≥ 1 they are evaluated in closed form; below, by their series in θ, whose terms are the
+moments m_k(σ) = ∫₀¹ e^{σu} u^k du.
+
+Left Jacobian, by differentiating Exp (ξ + dξ) = Exp(δ) Exp(ξ) to first order in δ, with t = W ρ:
+    jl(ξ) = [[W, ∂(Wρ)/∂φ + t× jl(φ), ∂(Wρ)/∂σ − t], [0, jl(φ), 0], [0, 0, 1]],
+where jl(φ) is SO(3)'s, ∂(Wρ)/∂σ = a_σ ρ + b_σ φ×ρ + c_σ φ×²ρ and
+    ∂(Wρ)/∂φ = −b ρ× + c ((φ·ρ) I + φρᵀ − 2ρφᵀ) + (b_θ φ×ρ + c_θ φ×²ρ) φᵀ/θ,
+from φ×²ρ = φ(φ·ρ) − θ²ρ. The right Jacobian is jr(ξ) = jl(−ξ).
 """
 
 from __future__ import annotations
@@ -17,11 +23,13 @@ from typing import ClassVar
 
 import numpy as np
 
-from ._coeffs import hat3, so3_polynomial_apply
+from ._coeffs import cross, hat3, so3_polynomial, so3_polynomial_apply
 from .base import LieGroup
 from .so3 import (
     angle,
     exp_matrix,
+    jr_inv_matrix,
+    jr_matrix,
     log_matrix,
     matrix_to_quaternion,
     project_to_rotation,
@@ -29,91 +37,180 @@ from .so3 import (
     sample_rotation,
 )
 
-_THETA_SERIES_BELOW = 0.5
-_THETA_TERMS = 9  # θ^{2·9} / 19! < 1e-20 for θ < 0.5
-_SIGMA_SERIES_BELOW = 8.0
-_SIGMA_TERMS = 51  # 8^51 / 51! < 1e-20
+_THETA_SERIES_BELOW = 1.0
+_THETA_TERMS = 11  # θ^{2·11} / 23! < 1e-22 for θ < 1
+_SIGMA_SERIES_BELOW = 20.0
+_SIGMA_TERMS = 90  # 20^90 / 90! < 1e-20
 
 
-_MOMENTS = 2 * _THETA_TERMS
-_TOP_MOMENT_SERIES = np.array(
-    [1.0 / (factorial(n) * (n + _MOMENTS + 1)) for n in range(_SIGMA_TERMS)]
+def _series_weights(offset: int, derivative: bool) -> list[float]:
+    """Weights w_j of θ²ʲ in Σⱼ (−1)ʲ θ²ʲ m/(2j + offset)!, or with ``derivative`` in its
+    derivative in θ divided by θ: the weight of θ²ʲ there is (−1)ʲ⁺¹ 2(j + 1)/(2j + 2 + offset)!."""
+    if derivative:
+        return [
+            (-1.0) ** (j + 1) * 2 * (j + 1) / factorial(2 * j + 2 + offset)
+            for j in range(_THETA_TERMS)
+        ]
+    return [(-1.0) ** j / factorial(2 * j + offset) for j in range(_THETA_TERMS)]
+
+
+_SERIES_FIRST_MOMENTS = np.array([1, 2, 2, 3, 3, 4])
+_SERIES_WEIGHTS = np.array(
+    [
+        _series_weights(1, False),
+        _series_weights(2, False),
+        _series_weights(1, False),
+        _series_weights(2, False),
+        _series_weights(1, True),
+        _series_weights(2, True),
+    ]
 )
-"""Coefficient of σⁿ in the series of m_K(σ), K = ``_MOMENTS``."""
-_MOMENT_WEIGHTS = [(-1.0) ** ((k - 1) // 2) / factorial(k) for k in range(_MOMENTS + 1)]
-"""(−1)ʲ/k! for k = 2j+1 and k = 2j+2: the weight of θ²ʲ m_k in b (k odd) and in c (k even)."""
+"""W's coefficients for θ < 1 as Σⱼ wⱼ θ²ʲ m_{first+2j}, one row per coefficient: b and c
+(b = Σⱼ (−1)ʲ θ²ʲ m_{2j+1}/(2j+1)!, c = Σⱼ (−1)ʲ θ²ʲ m_{2j+2}/(2j+2)!), their derivatives in σ
+(∂m_k/∂σ = m_{k+1}), and their derivatives in θ divided by θ."""
+_TOP_MOMENT = int(_SERIES_FIRST_MOMENTS.max()) + 2 * (_THETA_TERMS - 1)
+
+
+def _terms(largest: float, first_left_out, most: int, below: float) -> int:
+    """The fewest terms n ≤ ``most`` whose first left out, ``first_left_out(largest, n)``, is
+    below ``below``."""
+    return next((n for n in range(1, most) if first_left_out(largest, n) < below), most)
 
 
 def _sigma_terms(largest: float) -> int:
-    """The terms of m_K's series in σ that |σ| ≤ ``largest`` (< 8) needs: up to the first
-    σⁿ/n! below 1e-20, as ``_SIGMA_TERMS`` is for |σ| < 8."""
-    term = 1.0
-    for n in range(1, _SIGMA_TERMS):
-        term *= largest / n
-        if term < 1e-20:
-            return n
-    return _SIGMA_TERMS
+    """The terms of a moment's series in σ that |σ| ≤ ``largest`` (< 20) needs: up to the first
+    σⁿ/n! below 1e-20, as ``_SIGMA_TERMS`` is for |σ| < 20."""
+    return _terms(largest, lambda x, n: x**n / factorial(n), _SIGMA_TERMS, 1e-20)
 
 
-def _small_angle_coefficients(sigma: np.ndarray, theta: np.ndarray) -> tuple[np.ndarray, ...]:
-    """(b, c) for θ < 0.5 from their series b = Σⱼ (−1)ʲ θ²ʲ m_{2j+1}(σ)/(2j+1)! and
-    c = Σⱼ (−1)ʲ θ²ʲ m_{2j+2}(σ)/(2j+2)!, j < ``_THETA_TERMS``, in the moments
-    m_k(σ) = ∫₀¹ e^{σu} u^k du, which satisfy σ m_k = e^σ − k m_{k−1}.
+def _theta_terms(largest: float) -> int:
+    """The terms of W's series in θ² that θ ≤ ``largest`` (< 1) needs: up to the first
+    θ²ʲ/(2j+1)! below 1e-22, as ``_THETA_TERMS`` is for θ < 1."""
+    return _terms(largest, lambda x, j: x ** (2 * j) / factorial(2 * j + 1), _THETA_TERMS, 1e-22)
 
-    For |σ| < 8 the moments run downward from the series of the top one,
-    m_K = Σₙ σⁿ / (n! (n + K + 1)): an error in m_K reaches m_k times |σ|^{K−k} k!/K!, at most
-    0.35 for k ≥ 1. Above, they run upward from m_0 = (e^σ − 1)/σ, which is stable there.
+
+_MOMENT_SERIES = (
+    np.array(
+        [
+            [1.0 / (factorial(n) * (n + k + 1)) for n in range(_SIGMA_TERMS)]
+            for k in range(_TOP_MOMENT + 1)
+        ]
+    ),
+    np.array(
+        [
+            [factorial(k) / factorial(n + k + 1) for n in range(_SIGMA_TERMS)]
+            for k in range(_TOP_MOMENT + 1)
+        ]
+    ),
+)
+"""Coefficients of |σ|ⁿ (columns) in m_k(σ) (rows) = Σₙ σⁿ/(n! (n + k + 1)) for σ ≥ 0, and in
+m_k(σ) e^{−σ} = Σₙ k! |σ|ⁿ/(n + k + 1)! for σ < 0 (Kummer's transformation of ₁F₁): every term
+positive, so each moment is summed without cancellation."""
+
+
+def _powers(x: np.ndarray, count: int) -> np.ndarray:
+    """(count, …) array of xⁿ, n < count."""
+    powers = np.empty((count,) + x.shape)
+    powers[0] = 1.0
+    for n in range(1, count):  # faster than np.cumprod along the first axis
+        np.multiply(powers[n - 1], x, out=powers[n])
+    return powers
+
+
+def _moments(sigma: np.ndarray, top: int) -> np.ndarray:
+    """(top + 1, …) array of m_k(σ) = ∫₀¹ e^{σu} u^k du, k ≤ top.
+
+    For |σ| < 20 each by its series (``_MOMENT_SERIES``), as one matrix product with the powers
+    of |σ|. Above, by the recurrence σ m_k = e^σ − k m_{k−1} upward from m_0 = (e^σ − 1)/σ,
+    which is stable there.
     """
-    t2 = theta * theta
     below = np.abs(sigma) < _SIGMA_SERIES_BELOW
     s = np.where(below, sigma, 0.0)
-    e = np.exp(s)
-    moment = np.zeros_like(s)
-    for coefficient in _TOP_MOMENT_SERIES[_sigma_terms(np.abs(s).max(initial=0.0)) - 1 :: -1]:
-        moment = moment * s + coefficient
-    b, c = np.zeros_like(s), np.zeros_like(s)
-    for k in range(_MOMENTS, 0, -1):  # Horner in θ², from the highest power down
-        if k % 2:
-            b = b * t2 + _MOMENT_WEIGHTS[k] * moment
-        else:
-            c = c * t2 + _MOMENT_WEIGHTS[k] * moment
-        moment = (e - s * moment) / k
+    x = np.abs(s)
+    terms = _sigma_terms(x.max(initial=0.0))
+    positive, negative = (
+        series[: top + 1, :terms] @ _powers(x, terms) for series in _MOMENT_SERIES
+    )
+    moments = np.where(s < 0.0, negative * np.exp(s), positive)
     if below.all():
-        return b, c
+        return moments
     s = np.where(below, _SIGMA_SERIES_BELOW, sigma)
     e = np.exp(s)
-    moment, power = np.expm1(s) / s, np.ones_like(s)
-    b_up, c_up = np.zeros_like(s), np.zeros_like(s)
-    for k in range(1, _MOMENTS + 1):
-        moment = (e - k * moment) / s
-        if k % 2:
-            b_up += _MOMENT_WEIGHTS[k] * power * moment
-        else:
-            c_up += _MOMENT_WEIGHTS[k] * power * moment
-            power = power * t2
-    return np.where(below, b, b_up), np.where(below, c, c_up)
+    upward = [np.expm1(s) / s]
+    for k in range(1, top + 1):
+        upward.append((e - k * upward[-1]) / s)
+    return np.where(below, moments, np.array(upward))
 
 
-def w_coefficients(sigma: np.ndarray, theta: np.ndarray) -> tuple[np.ndarray, ...]:
-    """(a, b, c) of W = a I + b φ× + c φ×² for σ and θ = |φ| (module docstring)."""
+def _small_angle_coefficients(
+    sigma: np.ndarray, theta: np.ndarray, a: np.ndarray, derivatives: bool
+) -> list[np.ndarray]:
+    """W's coefficients but a, for θ < 1, from their series in θ² (``_SERIES_WEIGHTS``), whose
+    terms are the moments; ∂a/∂σ = m_1."""
+    rows = 6 if derivatives else 2
+    terms = _theta_terms(float(theta.max(initial=0.0)))
+    indices = _SERIES_FIRST_MOMENTS[:rows, None] + 2 * np.arange(terms)
+    moments = _moments(sigma, int(indices.max()))
+    powers = _powers(theta * theta, terms)
+    sums = list(
+        np.einsum("sj,j...,sj...->s...", _SERIES_WEIGHTS[:rows, :terms], powers, moments[indices])
+    )
+    if not derivatives:
+        return sums
+    return [*sums[:2], moments[1], *sums[2:]]
+
+
+def _large_angle_coefficients(
+    sigma: np.ndarray, theta: np.ndarray, a: np.ndarray, derivatives: bool
+) -> list[np.ndarray]:
+    """W's coefficients but a, for θ ≥ 1, in closed form, from z = σ + iθ:
+    E = ∫₀¹ e^{zu} du = (e^z − 1)/z gives b = Im E/θ, c = (a − Re E)/θ², and
+    E' = ∫₀¹ u e^{zu} du = (e^z (z − 1) + 1)/z² their derivatives (∂E/∂σ = E', ∂E/∂θ = iE')."""
+    z = sigma + 1j * theta
+    e = np.exp(z)
+    integral = (e - 1.0) / z
+    t2 = theta * theta
+    b = integral.imag / theta
+    c = (a - integral.real) / t2
+    if not derivatives:
+        return [b, c]
+    a_sigma = _moments(sigma, 1)[1]
+    moment = (e * (z - 1.0) + 1.0) / (z * z)
+    return [
+        b,
+        c,
+        a_sigma,
+        moment.imag / theta,
+        (a_sigma - moment.real) / t2,
+        (moment.real - b) / t2,
+        (moment.imag / theta - 2.0 * c) / t2,
+    ]
+
+
+def _coefficients(sigma: np.ndarray, theta: np.ndarray, derivatives: bool) -> list[np.ndarray]:
+    """[a, b, c] or with ``derivatives`` as ``w_derivatives``; a = (e^σ − 1)/σ = m_0."""
     sigma, theta = np.broadcast_arrays(np.asarray(sigma, float), np.asarray(theta, float))
     with np.errstate(invalid="ignore", divide="ignore"):
         a = np.where(sigma == 0.0, 1.0, np.expm1(sigma) / sigma)
     small = theta < _THETA_SERIES_BELOW
-    b = np.empty_like(theta)
-    c = np.empty_like(theta)
-    if np.any(small):
-        b[small], c[small] = _small_angle_coefficients(sigma[small], theta[small])
-    large = ~small
-    if np.any(large):
-        s, t, a_l = sigma[large], theta[large], a[large]
-        e = np.exp(s)
-        denominator = s * s + t * t
-        integral_sin = (e * (s * np.sin(t) - t * np.cos(t)) + t) / denominator
-        integral_cos = (e * (s * np.cos(t) + t * np.sin(t)) - s) / denominator
-        b[large] = integral_sin / t
-        c[large] = (a_l - integral_cos) / (t * t)
-    return a, b, c
+    out = [np.empty_like(theta) for _ in range(7 if derivatives else 2)]
+    for part, evaluate in ((small, _small_angle_coefficients), (~small, _large_angle_coefficients)):
+        if np.any(part):
+            for array, value in zip(
+                out, evaluate(sigma[part], theta[part], a[part], derivatives), strict=True
+            ):
+                array[part] = value
+    return [a, *out]
+
+
+def w_coefficients(sigma: np.ndarray, theta: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(a, b, c) of W = a I + b φ× + c φ×² for σ and θ = |φ| (module docstring)."""
+    return tuple(_coefficients(sigma, theta, derivatives=False))
+
+
+def w_derivatives(sigma: np.ndarray, theta: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(a, b, c, ∂a/∂σ, ∂b/∂σ, ∂c/∂σ, (∂b/∂θ)/θ, (∂c/∂θ)/θ) of W's coefficients."""
+    return tuple(_coefficients(sigma, theta, derivatives=True))
 
 
 def w_inverse_coefficients(a: np.ndarray, b: np.ndarray, c: np.ndarray, theta: np.ndarray):
@@ -125,6 +222,32 @@ def w_inverse_coefficients(a: np.ndarray, b: np.ndarray, c: np.ndarray, theta: n
     d = a - t2 * c
     delta = d * d + t2 * b * b
     return 1.0 / a, -b / delta, (b * b - c * d) / (a * delta)
+
+
+def _left_jacobian_blocks(tangent: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(a, b, c) of W, t = Wρ, ∂t/∂φ (…, 3, 3) and jl's last column's top ∂t/∂σ − t (…, 3), at
+    ξ = (ρ, φ, σ) (module docstring)."""
+    rho, phi, sigma = tangent[..., :3], tangent[..., 3:6], tangent[..., 6]
+    a, b, c, a_sigma, b_sigma, c_sigma, b_theta, c_theta = w_derivatives(sigma, angle(phi))
+    phi_rho = cross(phi, rho)
+    phi2_rho = cross(phi, phi_rho)
+    translation = a[..., None] * rho + b[..., None] * phi_rho + c[..., None] * phi2_rho
+    by_scale = (
+        a_sigma[..., None] * rho
+        + b_sigma[..., None] * phi_rho
+        + c_sigma[..., None] * phi2_rho
+        - translation
+    )
+    # c φρᵀ + (b_θ φ×ρ + c_θ φ×²ρ − 2cρ) φᵀ as one product of (…, 3, 2) by (…, 2, 3).
+    along_phi = (
+        b_theta[..., None] * phi_rho + c_theta[..., None] * phi2_rho - 2.0 * c[..., None] * rho
+    )
+    by_rotation = np.stack([c[..., None] * phi, along_phi], axis=-1) @ np.stack([rho, phi], axis=-2)
+    by_rotation += hat3(-b[..., None] * rho)
+    diagonal = c * np.einsum("...i,...i->...", phi, rho)
+    for k in range(3):
+        by_rotation[..., k, k] += diagonal
+    return (a, b, c), translation, by_rotation, by_scale
 
 
 @dataclasses.dataclass(frozen=True, eq=False, repr=False)
@@ -240,3 +363,36 @@ class Sim3(LieGroup):
         ad[..., :3, 6] = -rho
         ad[..., 3:6, 3:6] = hat3(phi)
         return ad
+
+    @classmethod
+    def jr(cls, tangent: np.ndarray) -> np.ndarray:
+        """jr(ξ) = jl(−ξ) in closed form (module docstring)."""
+        tangent = -np.asarray(tangent, float)
+        phi = tangent[..., 3:6]
+        w, translation, by_rotation, by_scale = _left_jacobian_blocks(tangent)
+        rotation_jacobian = jr_matrix(-phi)  # SO(3)'s jl(φ)
+        out = np.zeros(tangent.shape[:-1] + (7, 7))
+        out[..., :3, :3] = so3_polynomial(phi, *w)
+        out[..., :3, 3:6] = by_rotation + hat3(translation) @ rotation_jacobian
+        out[..., :3, 6] = by_scale
+        out[..., 3:6, 3:6] = rotation_jacobian
+        out[..., 6, 6] = 1.0
+        return out
+
+    @classmethod
+    def jr_inv(cls, tangent: np.ndarray) -> np.ndarray:
+        """jr⁻¹(ξ) = jl(−ξ)⁻¹ by blocks: [[W⁻¹, −W⁻¹ (∂t/∂φ jl(φ)⁻¹ + t×), −W⁻¹ (∂t/∂σ − t)],
+        [0, jl(φ)⁻¹, 0], [0, 0, 1]], with W⁻¹ from ``w_inverse_coefficients`` and SO(3)'s jl⁻¹
+        in closed form."""
+        tangent = -np.asarray(tangent, float)
+        phi = tangent[..., 3:6]
+        w, translation, by_rotation, by_scale = _left_jacobian_blocks(tangent)
+        w_inverse = so3_polynomial(phi, *w_inverse_coefficients(*w, angle(phi)))
+        rotation_inverse = jr_inv_matrix(-phi)  # SO(3)'s jl(φ)⁻¹
+        out = np.zeros(tangent.shape[:-1] + (7, 7))
+        out[..., :3, :3] = w_inverse
+        out[..., :3, 3:6] = -w_inverse @ (by_rotation @ rotation_inverse + hat3(translation))
+        out[..., :3, 6] = -np.einsum("...ij,...j->...i", w_inverse, by_scale)
+        out[..., 3:6, 3:6] = rotation_inverse
+        out[..., 6, 6] = 1.0
+        return out
