@@ -366,12 +366,12 @@ class Sim3(LieGroup):
 
     @classmethod
     def jr(cls, tangent: np.ndarray) -> np.ndarray:
-        """jr(ξ) = jl(−ξ) in closed form (module docstring)."""
-        tangent = -np.asarray(tangent, float)
-        phi = tangent[..., 3:6]
-        w, translation, by_rotation, by_scale = _left_jacobian_blocks(tangent)
+        """jr(ξ) = jl(−ξ) in closed form (module docstring); φ below is −ξ's."""
+        negated = -np.asarray(tangent, float)
+        phi = negated[..., 3:6]
+        w, translation, by_rotation, by_scale = _left_jacobian_blocks(negated)
         rotation_jacobian = jr_matrix(-phi)  # SO(3)'s jl(φ)
-        out = np.zeros(tangent.shape[:-1] + (7, 7))
+        out = np.zeros(negated.shape[:-1] + (7, 7))
         out[..., :3, :3] = so3_polynomial(phi, *w)
         out[..., :3, 3:6] = by_rotation + hat3(translation) @ rotation_jacobian
         out[..., :3, 6] = by_scale
@@ -382,14 +382,14 @@ class Sim3(LieGroup):
     @classmethod
     def jr_inv(cls, tangent: np.ndarray) -> np.ndarray:
         """jr⁻¹(ξ) = jl(−ξ)⁻¹ by blocks: [[W⁻¹, −W⁻¹ (∂t/∂φ jl(φ)⁻¹ + t×), −W⁻¹ (∂t/∂σ − t)],
-        [0, jl(φ)⁻¹, 0], [0, 0, 1]], with W⁻¹ from ``w_inverse_coefficients`` and SO(3)'s jl⁻¹
-        in closed form."""
-        tangent = -np.asarray(tangent, float)
-        phi = tangent[..., 3:6]
-        w, translation, by_rotation, by_scale = _left_jacobian_blocks(tangent)
+        [0, jl(φ)⁻¹, 0], [0, 0, 1]] at −ξ, with W⁻¹ from ``w_inverse_coefficients`` and SO(3)'s
+        jl⁻¹ in closed form."""
+        negated = -np.asarray(tangent, float)
+        phi = negated[..., 3:6]
+        w, translation, by_rotation, by_scale = _left_jacobian_blocks(negated)
         w_inverse = so3_polynomial(phi, *w_inverse_coefficients(*w, angle(phi)))
         rotation_inverse = jr_inv_matrix(-phi)  # SO(3)'s jl(φ)⁻¹
-        out = np.zeros(tangent.shape[:-1] + (7, 7))
+        out = np.zeros(negated.shape[:-1] + (7, 7))
         out[..., :3, :3] = w_inverse
         out[..., :3, 3:6] = -w_inverse @ (by_rotation @ rotation_inverse + hat3(translation))
         out[..., :3, 6] = -np.einsum("...ij,...j->...i", w_inverse, by_scale)
