@@ -252,6 +252,10 @@ class BlockPattern:
         full[self.block_of >= 0] = solution.reshape((-1, self.d) + columns)
         return full
 
+    def gather(self, per_node: np.ndarray) -> np.ndarray:
+        """The (size,) vector of a (num_nodes, d) array's free blocks (``scatter``'s inverse)."""
+        return per_node[self.block_of >= 0].reshape(-1)
+
     def matrix(self, data: np.ndarray) -> scipy.sparse.csc_matrix:
         """The matrix as scipy CSC (for inspection and tests)."""
         return scipy.sparse.csc_matrix((data, self.indices, self.indptr), (self.size, self.size))

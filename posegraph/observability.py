@@ -15,6 +15,7 @@ factorise, with variances in those directions that mean nothing (``marginals``'
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse
 
 from .graph import PoseGraph
 from .sparse_cholesky import NotPositiveDefinite
@@ -26,25 +27,53 @@ doctor's test of a singular information matrix)."""
 
 def node_information(graph: PoseGraph) -> np.ndarray:
     """(n, d, d) diagonal blocks of H of every node at zero residuals (module docstring)."""
-    d = graph.group.dof
-    edges, priors = graph.edges, graph.priors
-    blocks = np.zeros((graph.num_nodes, d, d))
-    if len(edges):
-        adjoint = edges.measurements.inverse().adjoint()
-        np.add.at(blocks, edges.i, np.swapaxes(adjoint, 1, 2) @ edges.information @ adjoint)
-        np.add.at(blocks, edges.j, edges.information)
-    if len(priors):
-        np.add.at(blocks, priors.i, priors.information)
-    return blocks
+    d, edges, priors = graph.group.dof, graph.edges, graph.priors
+    adjoint = edges.measurements.inverse().adjoint()
+    nodes = np.concatenate([edges.i, edges.j, priors.i])
+    blocks = np.concatenate(
+        [
+            np.swapaxes(adjoint, 1, 2) @ edges.information @ adjoint,
+            edges.information,
+            priors.information,
+        ]
+    )
+    # Summed per node as a product with the (n, k) incidence matrix of the k blocks' nodes.
+    incidence = scipy.sparse.csr_matrix(
+        (np.ones(nodes.size), (nodes, np.arange(nodes.size))), (graph.num_nodes, nodes.size)
+    )
+    return (incidence @ blocks.reshape(-1, d * d)).reshape(-1, d, d)
+
+
+def _unmeasured(eigenvalues: np.ndarray) -> np.ndarray:
+    """Which eigenvalues of each block (ascending, along the last axis) are of directions that
+    no measurement reaches."""
+    return eigenvalues <= SINGULAR * eigenvalues[..., -1:]
+
+
+def _counts(graph: PoseGraph, blocks: np.ndarray) -> np.ndarray:
+    """How many of each node block's directions no measurement reaches (0 for held nodes: the
+    gauge, ``PoseGraph.gauge_nodes``)."""
+    counts = np.count_nonzero(_unmeasured(np.linalg.eigvalsh(blocks)), axis=1)
+    counts[graph.gauge_nodes()] = 0
+    return counts
 
 
 def unmeasured_directions(graph: PoseGraph) -> np.ndarray:
-    """How many of each node's d tangent directions no measurement reaches (0 for held nodes:
-    the gauge, ``PoseGraph.gauge_nodes``)."""
-    eigenvalues = np.linalg.eigvalsh(node_information(graph))
-    counts = np.count_nonzero(eigenvalues <= SINGULAR * eigenvalues[:, -1:], axis=1)
-    counts[graph.gauge_nodes()] = 0
-    return counts
+    """How many of each node's d tangent directions no measurement reaches (0 for held nodes)."""
+    return _counts(graph, node_information(graph))
+
+
+def unmeasured_share(graph: PoseGraph) -> np.ndarray:
+    """(n, d): the diagonal of the projector onto each node's directions that no measurement
+    reaches, per tangent coordinate: 1 on an unmeasured axis (the rotation of a pose seen only by
+    position-only edges), 0 on a measured one, between for a direction that mixes axes (0 for
+    held nodes)."""
+    blocks = node_information(graph)
+    nodes = np.flatnonzero(_counts(graph, blocks))
+    eigenvalues, eigenvectors = np.linalg.eigh(blocks[nodes])
+    share = np.zeros(blocks.shape[:2])
+    share[nodes] = np.einsum("nkc,nc->nk", eigenvectors**2, _unmeasured(eigenvalues))
+    return share
 
 
 def singular_information(graph: PoseGraph) -> NotPositiveDefinite:

@@ -20,7 +20,7 @@ from posegraph.gnc import gnc_tls
 from posegraph.graph import PoseGraph
 from posegraph.initialization import choose, initialize
 from posegraph.lie import SE2, SE3, Sim3
-from posegraph.observability import unmeasured_directions
+from posegraph.observability import unmeasured_directions, unmeasured_share
 from posegraph.robust import KERNELS, RobustKernel, default_width, tls_gnc_weights
 from posegraph.sparse_cholesky import NotPositiveDefinite
 from posegraph.trajectory_io import Trajectory
@@ -120,7 +120,9 @@ def test_a_node_with_directions_nothing_measures_is_optimised_from_every_start(g
     could fix, and ``optimize`` with defaults failed (NotPositiveDefinite; the CLI's exit 3).
     The leaf can always meet its one edge, so the optimum is that of the graph without it:
     every initialiser and GNC now reach it, and chordal relaxation leaves the leaf's
-    unmeasured directions at their values."""
+    unmeasured directions at their values. From the graph's own values, Levenberg-Marquardt
+    crawled on the SE3 leaf seen by position only (100 iterations, not converged): Marquardt's
+    damping turned it by radians a step (``solvers.optimize``'s docstring)."""
     graph, unmeasured = _with_partial_leaf(group, measured)
     expected = np.zeros(graph.num_nodes, dtype=int)
     expected[-1] = np.count_nonzero(unmeasured)
@@ -128,7 +130,7 @@ def test_a_node_with_directions_nothing_measures_is_optimised_from_every_start(g
     without_leaf = graph.subgraph(graph.node_ids != 9999)
     best = posegraph.optimize(without_leaf, init="file").summary
     assert best.converged
-    for init in ("auto", "odometry", "spanning-tree", "chordal"):
+    for init in ("file", "auto", "odometry", "spanning-tree", "chordal"):
         summary = posegraph.optimize(graph.copy(), init=init).summary
         assert summary.converged, init
         assert summary.final_error == pytest.approx(best.final_error, rel=1e-6), init
@@ -142,6 +144,32 @@ def test_a_node_with_directions_nothing_measures_is_optimised_from_every_start(g
         np.testing.assert_allclose(leaf[:d, d], started[:d, d], atol=1e-12)
         if group is Sim3:
             np.testing.assert_allclose(np.linalg.det(leaf[:d, :d]), np.linalg.det(started[:d, :d]))
+
+
+def test_unmeasured_share_is_the_diagonal_of_the_projector_onto_unmeasured_directions():
+    """On an axis (the SE3 leaf's rotation, seen by position only) the share is 1, elsewhere 0.
+    Node 1 of a pair joined by one position-only edge 1 → 0 can turn about node 0's position,
+    a direction that mixes its rotation and translation: its share is the diagonal of
+    I − M⁺M, with M its block Ad(Z⁻¹)ᵀ Ω Ad(Z⁻¹) (``observability``'s docstring), here
+    formed with a pseudo-inverse."""
+    graph, unmeasured = _with_partial_leaf(SE3, "position")
+    expected = np.zeros((graph.num_nodes, SE3.dof))
+    expected[-1] = unmeasured
+    np.testing.assert_allclose(unmeasured_share(graph), expected, atol=1e-12)
+
+    pair = PoseGraph(SE3)
+    pair.add_nodes([0, 1], SE3.exp(np.random.default_rng(71).normal(size=(2, 6))))
+    measurement = SE3.exp(np.array([[0.4, -1.0, 2.0, 0.3, 0.2, -0.5]]))
+    information = np.diag([4.0, 9.0, 1.0, 0.0, 0.0, 0.0])
+    pair.add_edges([1], [0], measurement, information[None])
+    adjoint = measurement.inverse().adjoint()[0]
+    block = adjoint.T @ information @ adjoint
+    projector = np.eye(6) - np.linalg.pinv(block) @ block
+    share = unmeasured_share(pair)
+    np.testing.assert_allclose(share[1], np.diag(projector), atol=1e-12)
+    assert (share[1, :3] > 0.01).all() and (share[1, 3:] > 0.01).all()  # mixed
+    np.testing.assert_array_equal(share[0], 0.0)  # held: the gauge
+    assert unmeasured_directions(pair).tolist() == [0, 3]
 
 
 def test_gauss_newton_on_a_singular_system_names_the_unmeasured_node():

@@ -8,6 +8,13 @@ finite and lower. Levenberg-Marquardt updates λ by the gain ratio
 (Nielsen 1999; Madsen, Nielsen & Tingleff 2004, §3.2).
 A rejected step costs a refactorisation and an evaluation of the residuals: the Jacobians
 are computed only at accepted values, and the linearisation is kept.
+
+Marquardt's D = diag(H) scales the damping with the curvature. A direction that no measurement
+reaches at first order (``posegraph.observability``: the rotation of a pose seen only by
+position-only edges) still has a little curvature where residuals are not zero, through the
+Log's coupling, so its damped steps are huge and rejected one after another: such a pose made
+Levenberg-Marquardt crawl for 100 iterations. From the first rejected step on, those directions
+are damped by λ max diag(H), as identity damping (gtsam's and g2o's default) would.
 """
 
 from __future__ import annotations
@@ -30,7 +37,7 @@ from ..factors import (
 from ..graph import PoseGraph
 from ..lie import LieGroup
 from ..linear import NormalEquations
-from ..observability import describe_unmeasured, unmeasured_directions
+from ..observability import describe_unmeasured, unmeasured_directions, unmeasured_share
 from ..sparse_cholesky import NotPositiveDefinite
 from .options import SolverOptions
 from .summary import IterationRecord, Result, Summary
@@ -212,6 +219,9 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
     # |x| of the step test, at the start: it changes little over a run, and a Log of every
     # node per iteration would cost as much as a linearisation on small graphs.
     size = float(np.linalg.norm(current.values.log()))
+    # Per free coordinate, its share of directions that nothing measures (module docstring):
+    # found at the first rejected step, so a run that rejects none does not pay for it.
+    unmeasured = None
 
     for iteration in range(1, options.max_iterations + 1):
         if np.max(np.abs(gradient)) < options.gradient_tolerance:
@@ -222,6 +232,8 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
             break
         if options.damping == "diagonal":
             scale = np.clip(diagonal, options.min_diagonal, options.max_diagonal)
+            if unmeasured is not None:
+                scale = np.maximum(scale, unmeasured * diagonal.max())
         else:
             scale = np.ones_like(diagonal)
         damping = lam * scale if lm else None
@@ -284,6 +296,8 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
             if not np.isfinite(lam) or lam > options.max_diagonal:
                 termination = "damping exceeded its limit (no step lowers the error)"
                 break
+            if unmeasured is None and options.damping == "diagonal":
+                unmeasured = system.gather(unmeasured_share(graph))
             continue
         if decrease <= options.relative_decrease * previous_error and (
             not lm or predicted <= options.relative_decrease * previous_error
