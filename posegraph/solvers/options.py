@@ -20,7 +20,9 @@ class SolverOptions:
         gradient_tolerance: stop when the largest gradient entry, max|Jᵀ Ω r|, falls below this.
         step_tolerance: stop when |δ| < step_tolerance · (|x| + step_tolerance), with |x| the norm
             of the stacked node tangents (Log of each value) at the start.
-        damping: "diagonal" damps with λ·diag(H) (Marquardt, scale-invariant); "identity" with λ·I.
+        damping: "diagonal" damps with λ·diag(H) (Marquardt, scale-invariant; after a rejected
+            step, a node's directions that nothing measures with λ·max diag(H): see
+            ``posegraph.solvers.optimize``); "identity" with λ·I.
         initial_damping: λ at the start, relative to max diag(H) for "identity" damping.
         min_diagonal, max_diagonal: clamp diag(H) before using it as damping (as Ceres does).
         linear_solver: "auto", "cholmod" or "scipy" (see ``posegraph.sparse_cholesky``).
