@@ -25,6 +25,8 @@ consistency pass and a local search.
      (warm-started). A false loop that the solution bent itself to fit has a small residual s
      but a large d².
    Each change is kept only if it lowers the TLS objective Σ min(s, c²).
+5. The kept edges are solved for in least squares from there, with the caller's options: the
+   steps above start Levenberg-Marquardt's λ at ``INITIAL_DAMPING`` unless the options set it.
 """
 
 from __future__ import annotations
@@ -64,6 +66,12 @@ The others explain none of a lone false loop's s at first order; 56% was seen, f
 nonlinearity (s 4562 without it, against 10307 before, on intel)."""
 STAGE_ITERATIONS = 10
 STAGE_RELATIVE_DECREASE = 1e-5
+INITIAL_DAMPING = 1e-10
+"""Levenberg-Marquardt's initial λ in GNC's solves, unless the options set one. GNC's decisions
+depend on where its stages' few iterations end, and the search was validated with this value:
+with least squares' 1e-12 (``solvers.options.DEFAULT_INITIAL_DAMPING``), six of its scenario
+tests took other paths (a fitted false loop kept, true loops of a drifted region or of a
+monocular sequence rejected)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -200,12 +208,18 @@ def gnc_tls(
     ``kept``, decisions known to stand (the edges to keep, ``posegraph.api``), skips the search:
     the kept edges are solved for in least squares, and the others are rejected."""
     options = options or SolverOptions()
+    search = options
+    if options.initial_damping is None:
+        search = dataclasses.replace(options, initial_damping=INITIAL_DAMPING)
     width_sq = np.broadcast_to(np.square(width, dtype=float), graph.num_edges)
     run = _Run(callback)
     initial_error = 0.5 * tls_objective(graph, graph.values, mask, width_sq)
     try:
         if kept is None:
-            kept, result = _search(graph, mask, width_sq, options, run)
+            kept, searched = _search(graph, mask, width_sq, search, run)
+            work = graph.with_edges(kept)
+            work.set_values(searched.values)
+            result = run.solve(work, options, "final")
         else:
             result = run.solve(graph.with_edges(kept), options, "carried decisions")
     except _Stopped as stopped:

@@ -22,6 +22,7 @@ from posegraph.initialization import choose, initialize
 from posegraph.lie import SE2, SE3, Sim3
 from posegraph.observability import unmeasured_directions, unmeasured_share
 from posegraph.robust import KERNELS, RobustKernel, default_width, tls_gnc_weights
+from posegraph.solvers.options import DEFAULT_INITIAL_DAMPING
 from posegraph.sparse_cholesky import NotPositiveDefinite
 from posegraph.trajectory_io import Trajectory
 
@@ -336,6 +337,27 @@ def test_gnc_rejects_false_loops_on_a_generated_city(fraction):
         np.linalg.norm(plain.values.translation - clean.values.translation, axis=1).mean()
         > 10 * distance.mean()
     )
+
+
+def test_gnc_searches_with_its_own_initial_damping_unless_the_options_set_one():
+    """GNC's search starts Levenberg-Marquardt at λ = ``gnc.INITIAL_DAMPING``, the value it was
+    validated with, and its last solve at least squares' default; a λ the caller sets serves
+    every solve. A record's λ is the one after its iteration's update: at most twice the start
+    (a rejection), at least a third of it (an acceptance)."""
+    graph, _ = manhattan_world(num_poses=100, seed=67)
+    corrupted, _ = add_false_loops(graph, 0.1, seed=2)
+
+    def starts(options):
+        records = posegraph.optimize(corrupted.copy(), robust="gnc", options=options)
+        records = records.summary.iterations
+        firsts = [r for k, r in enumerate(records) if k == 0 or records[k - 1].stage != r.stage]
+        return {r.stage: r.damping for r in firsts}
+
+    for stage, damping in starts(None).items():
+        start = DEFAULT_INITIAL_DAMPING if stage == "final" else gnc.INITIAL_DAMPING
+        assert start / 3 <= damping <= 2 * start, stage
+    for stage, damping in starts(posegraph.SolverOptions(initial_damping=1e-3)).items():
+        assert 1e-3 / 3 <= damping <= 2e-3, stage
 
 
 def test_robust_edges_given_by_the_caller_cover_a_closure_between_consecutive_nodes():

@@ -139,12 +139,27 @@ def test_mixed_g2o_files_read_as_one_sim3_graph(tmp_path, dialect):
         np.testing.assert_allclose(again.edges.information, graph.edges.information, rtol=1e-12)
 
 
+def test_weak_scale_information_converges_as_fast_as_gauss_newton():
+    """At 2% drift per keyframe with scale information 100, the scale drift is a direction so
+    soft that Levenberg-Marquardt starting at λ = 1e-10 took 69–81 iterations to stop short of
+    the optimum (``solvers.options.DEFAULT_INITIAL_DAMPING``). Now it takes as few as
+    Gauss-Newton, give or take two, and ends no higher."""
+    graph = monocular_sequence(drift=0.02, seed=0).sim3_graph(100.0)
+    lm = correct_scale_drift(graph).result.summary
+    gn = correct_scale_drift(graph, options=posegraph.SolverOptions(method="gn")).result.summary
+    assert lm.converged and gn.converged
+    assert lm.num_iterations <= gn.num_iterations + 2
+    assert lm.final_error <= gn.final_error * (1 + 1e-9)
+
+
 @pytest.mark.parametrize(
-    "drift, seed, scale_information",
-    [(0.01, 0, None), (0.02, 1, 100.0)],
+    "drift, seed, scale_information, metres, scale",
+    [(0.01, 0, None, 1e-6, 1e-6), (0.02, 1, 100.0, 0.05, 2e-3)],
     ids=["1% drift, default lift", "2% drift, readmitted from chordal"],
 )
-def test_gnc_rejects_false_sim3_loops_of_a_monocular_sequence(drift, seed, scale_information):
+def test_gnc_rejects_false_sim3_loops_of_a_monocular_sequence(
+    drift, seed, scale_information, metres, scale
+):
     """Place recognition that matched the wrong place: with 30% false Sim3 loop closures
     (seed 1), least squares ends far off, and ``robust="gnc"`` rejects exactly the false loops
     and ends where the correction of the graph without them ends.
@@ -152,14 +167,18 @@ def test_gnc_rejects_false_sim3_loops_of_a_monocular_sequence(drift, seed, scale
     At 2% scale drift per keyframe (scale information 100), GNC's stages reject every loop,
     and re-admission brings the 20 true ones back together. Settled from the values the stages
     left, they end in another basin (least-squares cost 104.7, ATE 16 m); from the chordal
-    relaxation of the kept edges, at the correction without the false loops (99.1, ATE 1.6 m)."""
+    relaxation of the kept edges, at the correction without the false loops (99.1, ATE 1.6 m).
+    There the optimum is flat along the scale drift: GNC's final solve and the correction
+    without false loops start from different values and stop at the solver's tolerance 3e-6
+    apart in cost, 2.3 cm in position and 7e-4 in scale (measured), so positions are compared
+    to 5 cm and scales to 2e-3 there; the other basin is metres away."""
     sequence = monocular_sequence(drift=drift, seed=seed)
     graph = sequence.sim3_graph(scale_information)
     clean = correct_scale_drift(graph)
     corrupted, false = add_false_loops(graph, 0.3, seed=1)
     robust = correct_scale_drift(corrupted, robust="gnc")
     assert robust.result.summary.rejected_edges == np.flatnonzero(false).tolist()
-    np.testing.assert_allclose(robust.poses.translation, clean.poses.translation, atol=1e-6)
-    np.testing.assert_allclose(robust.scales, clean.scales, rtol=1e-6)
+    np.testing.assert_allclose(robust.poses.translation, clean.poses.translation, atol=metres)
+    np.testing.assert_allclose(robust.scales, clean.scales, rtol=scale)
     plain = correct_scale_drift(corrupted)
     assert sequence.ate(plain.poses) > 10 * sequence.ate(clean.poses)

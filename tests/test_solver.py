@@ -11,6 +11,7 @@ from posegraph.io import read_graph
 from posegraph.lie import SE2, SE3
 from posegraph.linear import NormalEquations
 from posegraph.solvers import SolverOptions, optimize
+from posegraph.solvers.options import DEFAULT_INITIAL_DAMPING
 from posegraph.sparse_cholesky import available_backends
 
 from .conftest import POSE_GROUPS, gnss_track, random_graph, union
@@ -154,7 +155,7 @@ def test_non_finite_steps_are_rejected(monkeypatch):
     result = optimize(graph)
     first = result.summary.iterations[0]
     assert not first.accepted and first.error == result.summary.initial_error
-    assert first.damping == 2 * SolverOptions().initial_damping  # the rejection doubled λ
+    assert first.damping == 2 * DEFAULT_INITIAL_DAMPING  # the rejection doubled λ
     assert np.isfinite(result.values.as_matrix()).all()
     assert result.summary.converged
 

@@ -39,7 +39,7 @@ from ..lie import LieGroup
 from ..linear import NormalEquations
 from ..observability import describe_unmeasured, unmeasured_directions, unmeasured_share
 from ..sparse_cholesky import NotPositiveDefinite
-from .options import SolverOptions
+from .options import DEFAULT_INITIAL_DAMPING, SolverOptions
 from .summary import IterationRecord, Result, Summary
 
 Callback = Callable[[IterationRecord], bool | None]
@@ -211,10 +211,10 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
     termination, converged = "maximum iterations reached", False
     data, gradient, diagonal = _assemble(graph, system, current, clock)
     lm = options.method == "lm"
-    if options.damping == "diagonal":
-        lam = options.initial_damping
-    else:
-        lam = options.initial_damping * float(diagonal.max())
+    initial = options.initial_damping
+    lam = DEFAULT_INITIAL_DAMPING if initial is None else initial
+    if options.damping == "identity":
+        lam *= float(diagonal.max())
     nu = 2.0
     # |x| of the step test, at the start: it changes little over a run, and a Log of every
     # node per iteration would cost as much as a linearisation on small graphs.
