@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import scipy.stats as scipy_stats
 from posegraph_datasets.generators import manhattan_world, resimulate, sphere
+from posegraph_datasets.monocular import monocular_sequence
 from posegraph_datasets.outliers import add_false_loops, rejection_rates, without_priors
 from posegraph_datasets.paths import BENCHMARK_GRAPHS, BEST_KNOWN_ERROR
 
@@ -341,22 +342,28 @@ def test_gnc_rejects_false_loops_on_a_generated_city(fraction):
 
 def test_gnc_searches_with_its_own_initial_damping_unless_the_options_set_one():
     """GNC's search starts Levenberg-Marquardt at λ = ``gnc.INITIAL_DAMPING``, the value it was
-    validated with, and its last solve at least squares' default; a λ the caller sets serves
+    validated with, and its final solve at least squares' default; a λ the caller sets serves
     every solve. A record's λ is the one after its iteration's update: at most twice the start
-    (a rejection), at least a third of it (an acceptance)."""
-    graph, _ = manhattan_world(num_poses=100, seed=67)
-    corrupted, _ = add_false_loops(graph, 0.1, seed=2)
+    (a rejection), at least a third of it (an acceptance). The final solve iterates on the
+    monocular sequence with weak scale information (on the city it starts converged)."""
 
-    def starts(options):
-        records = posegraph.optimize(corrupted.copy(), robust="gnc", options=options)
-        records = records.summary.iterations
+    def starts(graph, options):
+        records = posegraph.optimize(graph, robust="gnc", options=options).summary.iterations
         firsts = [r for k, r in enumerate(records) if k == 0 or records[k - 1].stage != r.stage]
         return {r.stage: r.damping for r in firsts}
 
-    for stage, damping in starts(None).items():
+    sequence = monocular_sequence(drift=0.02, seed=1).sim3_graph(100.0)
+    corrupted, _ = add_false_loops(sequence, 0.3, seed=1)
+    found = starts(corrupted, None)
+    assert "final" in found
+    for stage, damping in found.items():
         start = DEFAULT_INITIAL_DAMPING if stage == "final" else gnc.INITIAL_DAMPING
         assert start / 3 <= damping <= 2 * start, stage
-    for stage, damping in starts(posegraph.SolverOptions(initial_damping=1e-3)).items():
+    city, _ = manhattan_world(num_poses=100, seed=67)
+    corrupted, _ = add_false_loops(city, 0.1, seed=2)
+    found = starts(corrupted, posegraph.SolverOptions(initial_damping=1e-3))
+    assert "final" in found
+    for stage, damping in found.items():
         assert 1e-3 / 3 <= damping <= 2e-3, stage
 
 
