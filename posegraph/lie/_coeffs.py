@@ -9,6 +9,7 @@ Formulas: Eade, "Lie Groups for 2D and 3D Transformations", §2.2–§3.2, and B
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from math import factorial
 
 import numpy as np
@@ -16,6 +17,12 @@ import numpy as np
 _SERIES_BELOW = 0.1
 # The Q-matrix coefficients cancel to the fifth order: their series take over further out.
 _Q_SERIES_BELOW = 0.5
+
+
+def series_terms(first_left_out: Callable[[int], float], below: float, most: int) -> int:
+    """The fewest terms n < ``most`` of a truncated series whose first term left out,
+    ``first_left_out(n)``, is below ``below``; ``most`` if none is."""
+    return next((n for n in range(most) if first_left_out(n) < below), most)
 
 
 def _even_series(theta_sq: np.ndarray, coefficients) -> np.ndarray:

@@ -25,6 +25,8 @@ from typing import ClassVar, TypeVar
 
 import numpy as np
 
+from ._coeffs import series_terms
+
 G = TypeVar("G", bound="LieGroup")
 
 SCALED_NORM = 0.5
@@ -32,20 +34,13 @@ SCALED_NORM = 0.5
 TRUNCATION = 1e-18
 """``integral_of_exp`` sums the Taylor series until the first term left out is below this,
 relative: ‖B‖₁ᴷ⁺¹/(K + 2)! for K terms."""
-_MOST_TERMS = next(
-    k for k in range(1, 100) if SCALED_NORM ** (k + 1) / factorial(k + 2) < TRUNCATION
-)
+_MOST_TERMS = series_terms(lambda k: SCALED_NORM ** (k + 1) / factorial(k + 2), TRUNCATION, 100)
 
 
 def _taylor_terms(norm: float) -> int:
     """The fewest terms K of φ₁'s Taylor series (k ≤ K) for ‖B‖₁ ≤ ``norm`` (≤
     ``SCALED_NORM``): the first left out, ‖B‖₁ᴷ⁺¹/(K + 2)!, is below ``TRUNCATION``."""
-    left_out = norm / 2.0
-    for terms in range(_MOST_TERMS):
-        if left_out < TRUNCATION:
-            return terms
-        left_out *= norm / (terms + 3)
-    return _MOST_TERMS
+    return series_terms(lambda k: norm ** (k + 1) / factorial(k + 2), TRUNCATION, _MOST_TERMS)
 
 
 def _taylor_phi1(b: np.ndarray, terms: int) -> np.ndarray:

@@ -23,7 +23,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from ._coeffs import cross, hat3, so3_polynomial, so3_polynomial_apply
+from ._coeffs import cross, hat3, series_terms, so3_polynomial, so3_polynomial_apply
 from .base import LieGroup
 from .so3 import (
     angle,
@@ -71,22 +71,16 @@ _SERIES_WEIGHTS = np.array(
 _TOP_MOMENT = int(_SERIES_FIRST_MOMENTS.max()) + 2 * (_THETA_TERMS - 1)
 
 
-def _terms(largest: float, first_left_out, most: int, below: float) -> int:
-    """The fewest terms n ≤ ``most`` whose first left out, ``first_left_out(largest, n)``, is
-    below ``below``."""
-    return next((n for n in range(1, most) if first_left_out(largest, n) < below), most)
-
-
 def _sigma_terms(largest: float) -> int:
     """The terms of a moment's series in σ that |σ| ≤ ``largest`` (< 20) needs: up to the first
     σⁿ/n! below 1e-20, as ``_SIGMA_TERMS`` is for |σ| < 20."""
-    return _terms(largest, lambda x, n: x**n / factorial(n), _SIGMA_TERMS, 1e-20)
+    return series_terms(lambda n: largest**n / factorial(n), 1e-20, _SIGMA_TERMS)
 
 
 def _theta_terms(largest: float) -> int:
     """The terms of W's series in θ² that θ ≤ ``largest`` (< 1) needs: up to the first
     θ²ʲ/(2j+1)! below 1e-22, as ``_THETA_TERMS`` is for θ < 1."""
-    return _terms(largest, lambda x, j: x ** (2 * j) / factorial(2 * j + 1), _THETA_TERMS, 1e-22)
+    return series_terms(lambda j: largest ** (2 * j) / factorial(2 * j + 1), 1e-22, _THETA_TERMS)
 
 
 _MOMENT_SERIES = (
