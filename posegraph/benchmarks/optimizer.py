@@ -24,7 +24,7 @@ from ..graph import PoseGraph
 from ..io import read_graph
 from ..solvers import Summary
 from .table import MarkdownTable
-from .timing import add_timing_arguments, best_run
+from .timing import add_timing_arguments, best_run, taking_turns
 
 
 def benchmark_files() -> list[Path]:
@@ -76,15 +76,14 @@ def side_by_side(
     """``time_gtsam``, then ``time_posegraph`` from the graph's values and with ``init="auto"``,
     taking turns for ``rounds`` rounds; the best of each: ((seconds, iterations, error),
     (seconds, summary), (seconds, summary))."""
-    turns = [
-        (
-            time_gtsam(graph, repeats, budget),
-            time_posegraph(graph, repeats, "file", budget),
-            time_posegraph(graph, repeats, "auto", budget),
-        )
-        for _ in range(rounds)
-    ]
-    return tuple(min(timings, key=lambda timing: timing[0]) for timings in zip(*turns, strict=True))
+    return taking_turns(
+        [
+            lambda: time_gtsam(graph, repeats, budget),
+            lambda: time_posegraph(graph, repeats, "file", budget),
+            lambda: time_posegraph(graph, repeats, "auto", budget),
+        ],
+        rounds,
+    )
 
 
 def run(

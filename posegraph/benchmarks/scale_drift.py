@@ -28,7 +28,7 @@ from ..graph import PoseGraph
 from ..scale_drift import correct_scale_drift
 from .optimizer import time_gtsam
 from .table import MarkdownTable
-from .timing import BUDGET, best_run
+from .timing import BUDGET, best_run, taking_turns
 
 
 def run(
@@ -78,15 +78,13 @@ def _against_gtsam(graph: PoseGraph) -> str:
     """The best of ``correct_scale_drift`` (defaults) and of gtsam LM from the graph's values,
     taking turns for two rounds of ``timing.BUDGET`` seconds each: | posegraph (ms) | error |
     gtsam (ms) | gtsam iters | gtsam error | time ratio."""
-    turns = [
-        (
-            best_run(lambda _: correct_scale_drift(graph), 3, BUDGET),
-            time_gtsam(graph, 3, BUDGET),
-        )
-        for _ in range(2)
-    ]
-    ours, corrected = min((turn[0] for turn in turns), key=lambda timing: timing[0])
-    theirs, iterations, their_error = min((turn[1] for turn in turns), key=lambda timing: timing[0])
+    (ours, corrected), (theirs, iterations, their_error) = taking_turns(
+        [
+            lambda: best_run(lambda _: correct_scale_drift(graph), 3, BUDGET),
+            lambda: time_gtsam(graph, 3, BUDGET),
+        ],
+        2,
+    )
     return (
         f" | {1e3 * ours:.1f} | {corrected.result.summary.final_error:.8g} | {1e3 * theirs:.1f} "
         f"| {iterations} | {their_error:.8g} | {ours / theirs:.2f}"

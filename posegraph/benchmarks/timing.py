@@ -41,6 +41,14 @@ def best_run(
     return best, output
 
 
+def taking_turns(timings: list[Callable[[], tuple]], rounds: int) -> tuple[tuple, ...]:
+    """Each of ``timings`` (callables returning (seconds, …)) run in turn, for ``rounds`` rounds,
+    so that a slow spell of the machine does not fall on one of them alone; the fastest result
+    of each, in order."""
+    turns = [tuple(timing() for timing in timings) for _ in range(rounds)]
+    return tuple(min(results, key=lambda result: result[0]) for results in zip(*turns, strict=True))
+
+
 def best_time(function: Callable[[], object], repeats: int = 3) -> float:
     """The shortest of ``repeats`` wall-clock runs, in seconds (the least disturbed run)."""
     return best_run(lambda _: function(), repeats)[0]
