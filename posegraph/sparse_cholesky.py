@@ -7,7 +7,10 @@
   (``permc_spec="NATURAL"`` on the pre-permuted matrix). Pure scipy, always available.
 
 ``make_cholesky(..., backend="auto")`` picks CHOLMOD when cvxopt imports, else scipy.
-A matrix that is not positive definite raises ``NotPositiveDefinite``.
+A matrix that is not positive definite raises ``NotPositiveDefinite``. Both give each column's
+pivot (``pivots``): dⱼ of P A Pᵀ = L D Lᵀ (L unit lower triangular), the Schur complement's
+diagonal entry where column j is eliminated. dⱼ/Aⱼⱼ near zero marks a column that the columns
+eliminated before it nearly span.
 """
 
 from __future__ import annotations
@@ -153,17 +156,33 @@ class CholmodCholesky:
         parts = [slice(g * width, (g + 1) * width) for g in range(len(groups))]
         return np.array([(y[:, part].T @ scaled[:, part]).toarray() for part in parts])
 
+    def _places(self) -> np.ndarray:
+        """Where P A Pᵀ puts each column of A."""
+        columns = self._matrix(np.arange(self.size, dtype=float))
+        self._cholmod.solve(self._factor, columns, sys=8)  # Pᵀ
+        return np.array(columns).ravel().astype(np.int64)
+
     def _selected_blocks(self, groups: np.ndarray) -> np.ndarray:
         """The blocks from the selected inverse of L (``posegraph.selected_inversion``).
         Reading L out (cvxopt's ``getfactor``) leaves CHOLMOD's factor spent: the next
         ``factorize`` analyses the pattern afresh."""
-        columns = self._matrix(np.arange(self.size, dtype=float))
-        self._cholmod.solve(self._factor, columns, sys=8)  # Pᵀ: where P A Pᵀ puts each column
-        place = np.array(columns).ravel().astype(np.int64)
+        place = self._places()
         factor = self._cholmod.getfactor(self._factor)
         self._factor = None
         data, indices, indptr = self._compressed(factor)
         return inverse_blocks(SupernodalFactor(indptr, indices, data), place[groups])
+
+    def pivots(self) -> np.ndarray:
+        """Per column of A, its pivot in the last factorisation (``pivots``): L's diagonal
+        squared for a supernodal factor (P A Pᵀ = L Lᵀ, with cvxopt's default options), D for
+        a simplicial one (L D Lᵀ, where they ask for it)."""
+        try:
+            in_factor = np.array(self._cholmod.diag(self._factor)).ravel() ** 2
+        except ValueError:  # not supernodal: D⁻¹ 1 gives 1/D
+            inverse = self._matrix(1.0, (self.size, 1))
+            self._cholmod.solve(self._factor, inverse, sys=6)
+            in_factor = 1.0 / np.array(inverse).ravel()
+        return in_factor[self._places()]
 
     @staticmethod
     def _compressed(matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -216,6 +235,13 @@ class ScipyCholesky:
         x = np.empty_like(rhs)
         x[self._order] = self._lu.solve(rhs[self._order])
         return x
+
+    def pivots(self) -> np.ndarray:
+        """Per column, its pivot in the last factorisation (``pivots``): U's diagonal, in the
+        fixed ordering."""
+        pivots = np.empty(self._size)
+        pivots[self._order] = self._lu.U.diagonal()[self._lu.perm_c]
+        return pivots
 
     def covariance_blocks(self, groups: np.ndarray) -> np.ndarray:
         """Blocks (A⁻¹)[g, g], (G, c, c), by solving for the unit columns of each group."""

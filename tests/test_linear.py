@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import scipy.sparse
 
 from posegraph.factors import linearize_between, linearize_priors
 from posegraph.linear import NormalEquations
-from posegraph.sparse_cholesky import NotPositiveDefinite, available_backends
+from posegraph.sparse_cholesky import NotPositiveDefinite, available_backends, make_cholesky
 
 from .conftest import POSE_GROUPS, random_graph
 
@@ -79,6 +80,38 @@ def test_indefinite_matrix_is_reported(backend):
     data, _ = system.assemble(lin, graph.edges.information, prior_lin, graph.priors.information)
     with pytest.raises(NotPositiveDefinite):
         system.factorize(data, np.full(system.size, -1e9))
+
+
+@pytest.mark.parametrize(
+    "backend, factor",
+    [("cholmod", "simplicial"), ("cholmod", "supernodal"), ("scipy", "LU")],
+)
+def test_pivots_are_each_columns_schur_complement_where_it_is_eliminated(
+    backend, factor, monkeypatch
+):
+    """A random sparse SPD matrix whose diagonal spans 1e-6 to 1e6: the pivots' product is
+    det A, and each pivot lies between 1/(A⁻¹)ⱼⱼ (column j eliminated last) and Aⱼⱼ (first),
+    which a pivot given to the wrong column would miss. CHOLMOD's factor is supernodal (LLᵀ)
+    with cvxopt's default options, simplicial (LDLᵀ) where they ask for it."""
+    if backend not in available_backends():
+        pytest.skip(f"{backend} is not installed here")
+    if factor == "simplicial":
+        from cvxopt import cholmod
+
+        monkeypatch.setitem(cholmod.options, "supernodal", 0)
+    size = 300
+    rng = np.random.default_rng(76)
+    root = scipy.sparse.random(size, size, density=0.01, random_state=77) + scipy.sparse.eye(size)
+    scale = scipy.sparse.diags(10 ** rng.uniform(-3, 3, size))
+    matrix = (scale @ root @ root.T @ scale).tocsc()
+    matrix.sort_indices()
+    cholesky = make_cholesky(matrix.indices, matrix.indptr, size, backend)
+    cholesky.factorize(matrix.data)
+    pivots = cholesky.pivots()
+    dense = matrix.toarray()
+    assert np.log(pivots).sum() == pytest.approx(np.linalg.slogdet(dense)[1], abs=1e-9)
+    lowest, highest = 1.0 / np.diag(np.linalg.inv(dense)), np.diag(dense)
+    assert np.all(pivots >= lowest * (1 - 1e-9)) and np.all(pivots <= highest * (1 + 1e-9))
 
 
 def test_pattern_holds_one_block_per_node_and_edge_pair():
