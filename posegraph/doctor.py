@@ -15,7 +15,12 @@ import numpy as np
 from .factors import chi2
 from .initialization import odometry_mask
 from .io.reader import ReadResult
-from .observability import describe_unmeasured, unmeasured_directions
+from .observability import (
+    describe_moving,
+    describe_unmeasured,
+    undetermined_direction,
+    unmeasured_directions,
+)
 
 CONDITION_LIMIT = 1e12
 
@@ -106,6 +111,17 @@ def diagnose(read: ReadResult) -> Diagnosis:
                 " add measurements of those directions, or fix those nodes",
             )
         )
+    elif graph.num_nodes and graph.initialized.all():
+        moving = undetermined_direction(graph, graph.values)
+        if moving is not None:
+            problems.append(
+                Problem(
+                    describe_moving(graph, moving),
+                    "their values along that motion are the initialisation's and their"
+                    " covariances are refused; add measurements that tie them to the rest in"
+                    " every direction, or fix one of them",
+                )
+            )
     condition = eigenvalues[~singular, -1] / eigenvalues[~singular, 0]
     conditions = {}
     if condition.size:

@@ -19,7 +19,7 @@ import numpy as np
 from .graph import PoseGraph
 from .lie import LieGroup
 from .linear import NormalEquations, factorized_information
-from .observability import singular_information, unmeasured_directions
+from .observability import singular_information, undetermined_direction
 from .sparse_cholesky import NotPositiveDefinite, covariance_by_solves
 
 
@@ -80,8 +80,8 @@ def marginals(
         edge_weights, prior_weights = graph.solution.weights_for(graph.edges, graph.priors)
         if np.any(edge_weights != 1.0) or np.any(prior_weights != 1.0):
             graph = graph.weighted(edge_weights, prior_weights)
-    if require_measured and unmeasured_directions(graph).any():
-        raise singular_information(graph)
+    if require_measured and undetermined_direction(graph, values, linear_solver) is not None:
+        raise singular_information(graph, values)
     groups = index[None, :] if joint else index[:, None]
     # Solves serve any factor, so the last least-squares solve's normal equations do (a back
     # end reading its newest pose's covariance after each step); for selected inversion, new
@@ -95,6 +95,6 @@ def marginals(
     try:
         factorized_information(graph, values, system)
     except NotPositiveDefinite:
-        raise singular_information(graph) from None
+        raise singular_information(graph, values) from None
     covariances = joint_covariances(system, groups)
     return covariances[0] if joint else covariances

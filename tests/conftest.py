@@ -10,6 +10,7 @@ from posegraph_datasets.generators import manhattan_world
 from posegraph_datasets.outliers import add_fixes
 from posegraph_datasets.paths import gtsam_data_dir, shared_datasets_dir
 
+import posegraph
 from posegraph.graph import PoseGraph
 from posegraph.lie import SE2, SE3, LieGroup, Sim3
 
@@ -79,6 +80,23 @@ def union(first: PoseGraph, second: PoseGraph, id_offset: int) -> PoseGraph:
         graph.add_edges(
             ids[part.edges.i], ids[part.edges.j], part.edges.measurements, part.edges.information
         )
+    return graph
+
+
+def maps_joined_by_positions(group: type[LieGroup], joins: int) -> PoseGraph:
+    """Two maps of 20 poses (ids 10–48 and 1010–1048), optimised, joined by ``joins``
+    position-only edges (σ = 0.1 m) from nodes 16, 30, 40 of the first to 1018, 1034, 1012 of
+    the second."""
+    first, second = (random_graph(group, 20, 6, seed=seed, noise=0.02) for seed in (72, 73))
+    graph = union(first, second, 1000)
+    rng = np.random.default_rng(74)
+    dof, d = group.dof, group.point_dim
+    information = np.diag(np.where(np.arange(dof) < d, 100.0, 0.0))
+    for i, j in [(16, 1018), (30, 1034), (40, 1012)][:joins]:
+        a, b = graph.index([i, j])
+        measurement = graph.values[a].between(graph.values[b]).retract(0.05 * rng.normal(size=dof))
+        graph.add_edges([i], [j], measurement[None], information[None])
+    posegraph.optimize(graph)
     return graph
 
 

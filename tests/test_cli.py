@@ -21,8 +21,9 @@ from posegraph_datasets.paths import BENCHMARK_GRAPHS
 
 from posegraph.api import robust_mask
 from posegraph.io import read_graph, write_graph
+from posegraph.lie import SE3
 
-from .conftest import city_with_fixes
+from .conftest import city_with_fixes, maps_joined_by_positions
 from .malformed import MALFORMED
 from .test_malformed import write_case
 
@@ -160,6 +161,22 @@ def test_nodes_with_directions_nothing_measures_are_named(tmp_path):
     assert optimized["initialization"] == "chordal" and optimized["converged"]
     completed = run("optimize", graph_file, "--covariances", tmp_path / "c.txt", check_exit=2)
     assert "measured by nothing (node 3: 1 of its 3 directions)" in completed.stderr
+
+
+def test_a_map_that_can_turn_about_position_only_edges_is_named_and_has_no_covariances(tmp_path):
+    """Two SE3 maps joined by two position-only edges: the second can turn about the line
+    through them. No node has a direction of its own that nothing measures, and H factorises
+    at the optimum, so covariances were written (variances of 1e11 to 5e13 for that turn).
+    Now ``info`` names the nodes that turn, and ``--covariances`` is refused, with nothing
+    written."""
+    graph_file, out, written = tmp_path / "maps.g2o", tmp_path / "out.g2o", tmp_path / "c.txt"
+    write_graph(maps_joined_by_positions(SE3, 2), str(graph_file))
+    named = "nodes 1010, 1012, 1014, … (20 nodes) move together without changing any residual"
+    assert any(p["what"].startswith(named) for p in run_json("info", graph_file)["problems"])
+    completed = run("optimize", graph_file, "-o", out, "--covariances", written, check_exit=2)
+    assert f"measured by nothing ({named}" in completed.stderr
+    assert "Traceback" not in completed.stderr
+    assert not out.exists() and not written.exists()
 
 
 def monocular_file(tmp_path, false_loops: float = 0.0) -> tuple[str, str, np.ndarray]:
