@@ -2,8 +2,9 @@
 
 It reports what a graph holds and every problem worth knowing before optimising it, each with
 a one-line suggestion: disconnected components, missing gauge, ill-conditioned or asymmetric
-information, nodes with directions that nothing measures, duplicate edges, self-loops, breaks
-in the odometry chain, and lines skipped when reading leniently.
+information, nodes with directions that nothing measures (each on its own, or several moving
+together at the file's values), duplicate edges, self-loops, breaks in the odometry chain, and
+lines skipped when reading leniently.
 """
 
 from __future__ import annotations

@@ -37,8 +37,9 @@ doctor's test of a singular information matrix)."""
 
 UNDETERMINED = 1e-10
 """A column of H₁ (module docstring) whose pivot is at most this share of its diagonal entry
-completes a direction that nothing measures. Measured: the smallest share is 4e-6 on the 12
-benchmark graphs (MIT, parking-garage). Where two SE3 or Sim3 maps joined by two position-only
+completes a direction that nothing measures. Measured: the smallest share on the 12 benchmark
+graphs is 4e-6 at their optima (MIT, parking-garage) and 2e-7 at their files' values (w10000,
+as ``posegraph info`` tests them). Where two SE3 or Sim3 maps joined by two position-only
 edges can turn about them (32 random cases), H₁ did not factorise in 19 (CHOLMOD) and 17
 (SuperLU), and the least share was at most 6e-14 and 4e-13 in the others."""
 
