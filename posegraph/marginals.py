@@ -66,9 +66,10 @@ def marginals(
     the nodes together (for a pair, the 2d × 2d matrix with their cross-covariance). Raises
     ``NotPositiveDefinite`` if the information matrix is singular, naming the nodes with
     directions that no measurement reaches (``posegraph.observability``), if any. With
-    ``require_measured``, such nodes are refused even where H factorises (away from zero
-    residuals it can, and gives them covariances that mean nothing), at the cost of a pass over
-    all edges.
+    ``require_measured``, such directions are refused even where H factorises (away from zero
+    residuals it can, and gives them covariances that mean nothing), also those that move
+    several nodes together (``observability.undetermined_direction``: a map that can turn about
+    the position-only edges that join it to the rest), at the cost of one more factorisation.
     """
     if values is None:
         graph.require_values("optimise the graph first (covariances are taken at its values)")
