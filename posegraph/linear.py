@@ -209,30 +209,34 @@ class BlockPattern:
             data[self.diagonal_positions] += damping
         self.cholesky.factorize(data)
 
-    def factorize_regularized(self, data: np.ndarray) -> None:
+    def factorize_regularized(self, data: np.ndarray) -> float:
         """Factorise the matrix, or if it is not numerically positive definite (weights of
         extreme range, or directions that nothing measures), the matrix plus the smallest ridge
-        ε diag(H), ε in ``RIDGES``, that is. A zero of diag(H) is a direction that nothing
-        measures (its row and column are zero, H being positive semi-definite): its ridge is
-        that of H's largest diagonal entry, so that the solution is zero along it. For systems
-        whose solution is an estimate (initial values, leverage), where the ridge's change does
-        not matter; raises ``NotPositiveDefinite`` if no ridge helps."""
+        ε ``ridge_scale``, ε in ``RIDGES``, that is; returns ε (0.0 if none was needed). For
+        systems whose solution is an estimate (initial values, leverage), where the ridge's
+        change does not matter; raises ``NotPositiveDefinite`` if no ridge helps."""
         try:
             self.factorize(data)
-            return
+            return 0.0
         except NotPositiveDefinite:
-            diagonal = self.diagonal(data)
-        largest = float(diagonal.max(initial=0.0))
-        diagonal = np.where(diagonal == 0, largest if 0 < largest < np.inf else 1.0, diagonal)
+            scale = self.ridge_scale(data)
         for ridge in RIDGES:
             try:
-                self.factorize(data, ridge * diagonal)
-                return
+                self.factorize(data, ridge * scale)
+                return ridge
             except NotPositiveDefinite:
                 continue
         raise NotPositiveDefinite(
             f"not numerically positive definite, even with a ridge of {RIDGES[-1]:g} diag(H)"
         )
+
+    def ridge_scale(self, data: np.ndarray) -> np.ndarray:
+        """diag(H), where a zero (a direction that nothing measures: its row and column are
+        zero, H being positive semi-definite) takes H's largest diagonal entry, so that a
+        ridge's solution is zero along it."""
+        diagonal = self.diagonal(data)
+        largest = float(diagonal.max(initial=0.0))
+        return np.where(diagonal == 0, largest if 0 < largest < np.inf else 1.0, diagonal)
 
     def diagonal(self, data: np.ndarray) -> np.ndarray:
         """diag(H) from its CSC data."""

@@ -43,9 +43,6 @@ as ``posegraph info`` tests them). Where two SE3 or Sim3 maps joined by two posi
 edges can turn about them (32 random cases), H₁ did not factorise in 19 (CHOLMOD) and 17
 (SuperLU), and the least share was at most 6e-14 and 4e-13 in the others."""
 
-RIDGE = 1e-12
-"""Where H₁ does not factorise, H₁ plus this times its diagonal is, to find the direction."""
-
 MOVES = 1e-6
 """A node moves along an undetermined direction where its part of it is above this share of
 the largest node's."""
@@ -135,35 +132,28 @@ def undetermined_direction(
     to first order (module docstring), as (n, d) tangents with largest entry 1 (zero on held
     nodes), or None if there is none. In the factorisation of H₁, the column of least pivot
     share completes such a direction if its share is at most ``UNDETERMINED``, or if H₁ does
-    not factorise (then H₁ + ``RIDGE`` diag(H₁) is); the direction is found by inverse
-    iteration from that unit column. None also if even the ridge does not factorise (as
-    information that is not positive semi-definite can make it)."""
+    not factorise (then H₁ plus the least ridge that does is: ``factorize_regularized``); the
+    direction is found by inverse iteration from that unit column. None also if no ridge
+    factorises it (as information that is not positive semi-definite can make it)."""
     system = NormalEquations(graph, graph.gauge_nodes(), linear_solver)
     if system.size == 0:
         return None
     data = first_order_information(graph, values, system)
-    diagonal = system.diagonal(data)
-    # A zero diagonal entry is a coordinate that nothing measures at all (its row is zero).
-    diagonal = np.where(diagonal > 0, diagonal, max(float(diagonal.max()), 1.0))
     try:
-        system.factorize(data)
-        singular = False
+        ridge = system.factorize_regularized(data)
     except NotPositiveDefinite:
-        try:
-            system.factorize(data, RIDGE * diagonal)
-        except NotPositiveDefinite:
-            return None
-        singular = True
-    share = system.cholesky.pivots() / diagonal
+        return None
+    scale = system.ridge_scale(data)
+    share = system.cholesky.pivots() / scale
     column = int(np.argmin(share))
-    if not singular and share[column] > UNDETERMINED:
+    if ridge == 0.0 and share[column] > UNDETERMINED:
         return None
     unit = np.zeros(system.size)
     unit[column] = 1.0
     # Inverse iteration from that column, two solves: each shrinks the other directions' parts
     # against this one's by the ratio of its eigenvalue (near zero) to theirs. After one, the
     # tests' directions changed residuals by up to 3e-11 of a generic one; after two, 1e-15.
-    direction = system.solve(diagonal * system.solve(unit))
+    direction = system.solve(scale * system.solve(unit))
     direction = system.scatter(direction)
     return direction / np.abs(direction).max()
 
