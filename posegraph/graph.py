@@ -68,6 +68,21 @@ def information_problems(information: np.ndarray) -> tuple[np.ndarray, Callable[
     return bad, why
 
 
+def start_information(measurements: LieGroup, information: np.ndarray) -> np.ndarray:
+    """Each between edge's information on its start node's tangent where its residual is zero,
+    Ad(Z⁻¹)ᵀ Ω Ad(Z⁻¹): there ∂r/∂δᵢ = −Ad(Z⁻¹) (CONVENTIONS.md)."""
+    adjoint = measurements.inverse().adjoint()
+    return np.swapaxes(adjoint, 1, 2) @ information @ adjoint
+
+
+def overflowing_edges(measurements: LieGroup, information: np.ndarray) -> np.ndarray:
+    """Which between edges' ``start_information`` overflows: their translation, weighed by
+    their information, is too large for double precision (beyond about 1e154 for a unit
+    information), so no cost or normal equations can hold them."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        return ~np.isfinite(start_information(measurements, information)).all(axis=(1, 2))
+
+
 def information_ranks(information: np.ndarray) -> np.ndarray:
     """rank Ωₖ of each of (n, d, d) information matrices: the directions it weighs (2 for an
     SE2 position-only prior, not 3), counting eigenvalues above the tolerance of
@@ -395,6 +410,13 @@ class PoseGraph:
         new = self._edge_set(i_ids, j_ids, measurements, information)
         if np.any(new.i == new.j):
             raise ValueError(f"self-loop on node {self.node_ids[new.i[new.i == new.j][0]]}")
+        overflowing = np.flatnonzero(overflowing_edges(new.measurements, new.information))
+        if overflowing.size:
+            i, j = self.node_ids[new.i[overflowing[0]]], self.node_ids[new.j[overflowing[0]]]
+            raise ValueError(
+                f"the edge {i} → {j}: its translation weighed by its information overflows "
+                f"(Ad(Z⁻¹)ᵀ Ω Ad(Z⁻¹) at node {i}); it is too large for double precision"
+            )
         start = self.num_edges
         self.edges = self.edges.extended(new)
         self.structure_version += 1

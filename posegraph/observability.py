@@ -26,7 +26,7 @@ import numpy as np
 import scipy.sparse
 
 from .factors import Linearization, between_jacobians, relative_poses
-from .graph import PoseGraph
+from .graph import PoseGraph, start_information
 from .lie import LieGroup
 from .linear import NormalEquations
 from .sparse_cholesky import NotPositiveDefinite
@@ -51,11 +51,10 @@ the largest node's."""
 def node_information(graph: PoseGraph) -> np.ndarray:
     """(n, d, d) diagonal blocks of H of every node at zero residuals (module docstring)."""
     d, edges, priors = graph.group.dof, graph.edges, graph.priors
-    adjoint = edges.measurements.inverse().adjoint()
     nodes = np.concatenate([edges.i, edges.j, priors.i])
     blocks = np.concatenate(
         [
-            np.swapaxes(adjoint, 1, 2) @ edges.information @ adjoint,
+            start_information(edges.measurements, edges.information),
             edges.information,
             priors.information,
         ]
@@ -134,11 +133,14 @@ def undetermined_direction(
     share completes such a direction if its share is at most ``UNDETERMINED``, or if H₁ does
     not factorise (then H₁ plus the least ridge that does is: ``factorize_regularized``); the
     direction is found by inverse iteration from that unit column. None also if no ridge
-    factorises it (as information that is not positive semi-definite can make it)."""
+    factorises it (as information that is not positive semi-definite can make it), or if H₁
+    overflows at ``values`` (a pose too large for double precision), where nothing is told."""
     system = NormalEquations(graph, graph.gauge_nodes(), linear_solver)
     if system.size == 0:
         return None
     data = first_order_information(graph, values, system)
+    if not np.isfinite(data).all():
+        return None
     try:
         ridge = system.factorize_regularized(data)
     except NotPositiveDefinite:

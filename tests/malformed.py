@@ -89,6 +89,19 @@ MALFORMED = [
         1,
         "a number is out of range",
     ),
+    (
+        "edge-translation-squares-overflow",
+        V0 + V1 + f"EDGE_SE2 0 1 1e200 0 0 {INFO2}\n",
+        3,
+        "EDGE_SE2: a number is out of range: the edge's translation weighed by its information "
+        "overflows (Ad(Z⁻¹)ᵀ Ω Ad(Z⁻¹) at node 0)",
+    ),
+    (
+        "se3-edge-translation-near-largest-double",
+        SE3_V0 + SE3_V1 + f"EDGE_SE3:QUAT 0 1 0 0 1e308 {Q} {INFO3}\n",
+        3,
+        "the edge's translation weighed by its information overflows",
+    ),
     ("empty-file", "", None, "holds no vertices or edges"),
     ("only-comments", "# nothing here\n\n   \n", None, "holds no vertices or edges"),
     ("missing-file", None, None, "no such file"),

@@ -77,7 +77,8 @@ def test_information_is_checked_where_it_is_given():
 
 def test_values_and_measurements_are_checked_where_they_are_given():
     """Matrices off the group (a transposed pose, a scaled rotation, a wrong last row) or not
-    finite are refused with the node or measurement named; rounding drift is projected away."""
+    finite are refused with the node or measurement named, and so is an edge whose translation
+    weighed by its information overflows; rounding drift is projected away."""
     graph = PoseGraph("SE3")
     pose = SE3.exp(np.array([1.0, 2.0, 3.0, 0.1, 0.2, 0.3])).as_matrix()
     bottom = np.eye(4)
@@ -104,6 +105,11 @@ def test_values_and_measurements_are_checked_where_they_are_given():
         graph.add_edge(5, 6, 2.0 * pose, np.eye(6))
     with pytest.raises(ValueError, match="the measurement of the prior on node 6 is not finite"):
         graph.add_prior(6, np.full((4, 4), np.inf), np.eye(6))
+    far = SE3(np.eye(3), np.array([1e160, 0.0, 0.0]))  # finite, but its squares overflow
+    with pytest.raises(ValueError, match=r"edge 5 → 6: its translation weighed by its information"):
+        graph.add_edge(5, 6, far, np.eye(6))
+    assert graph.num_edges == 0
+    graph.add_edge(5, 6, far, np.diag([0.0, 0.0, 0.0, 1.0, 1.0, 1.0]))  # rotation only: finite
     with pytest.raises(ValueError, match="a pose graph holds one of SE2, SE3, Sim3, not 'se3'"):
         PoseGraph("se3")
 

@@ -7,7 +7,7 @@ from collections import Counter
 
 import numpy as np
 
-from ..graph import PoseGraph, information_problems
+from ..graph import PoseGraph, information_problems, overflowing_edges
 from ..initialization import align_to_priors, spanning_tree_values
 from ..lie import SE3, Sim3
 from ..lifting import (
@@ -170,6 +170,22 @@ def _check_information(rows: Rows, measurements, information, checker: LineCheck
     return kept, measurements[~bad], information[~bad]
 
 
+def _check_overflow(rows: Rows, measurements, information, checker: LineChecker):
+    """The edges whose information at their start node is finite (``overflowing_edges``)."""
+    bad = overflowing_edges(measurements, information)
+    if not bad.any():
+        return rows, measurements, information
+    kept = checker.keep_good(
+        rows,
+        bad,
+        lambda k: (
+            "a number is out of range: the edge's translation weighed by its information "
+            f"overflows (Ad(Z⁻¹)ᵀ Ω Ad(Z⁻¹) at node {rows.ids(0)[k]})"
+        ),
+    )
+    return kept, measurements[~bad], information[~bad]
+
+
 def _pad_missing_information(entries: list, spec: TagFormat) -> list:
     """Lines that omit their information get zeros in its place (for identity_information, which
     replaces every information after parsing)."""
@@ -232,6 +248,8 @@ def _convert(spec: TagFormat, rows: Rows, options: ReadOptions, checker, collect
         if options.identity_information:
             information = np.broadcast_to(np.eye(spec.group.dof), information.shape).copy()
         converted = _check_information(rows, measurements, information, checker, options)
+        if spec.kind == "edge":
+            converted = _check_overflow(*converted, checker)
         if len(converted[0]):
             (collected.edges if spec.kind == "edge" else collected.priors).append(converted)
     elif spec.kind == "parameter":
