@@ -222,9 +222,12 @@ def convert(args: argparse.Namespace) -> int:
         raise UsageError(f"{error}; say --to g2o|toro|tum|kitti") from None
     inputs = _Inputs(args)
     graph = inputs.graph(args.input).graph
-    written = convert_graph(
-        graph, args.output, args.to, args.sim3_dialect, args.g2o_rotation_information
-    )
+    try:
+        written = convert_graph(
+            graph, args.output, args.to, args.sim3_dialect, args.g2o_rotation_information
+        )
+    except ValueError as error:  # what the output format cannot hold
+        raise UsageError(f"{args.input}: {error}") from None
     record = {
         "command": "convert",
         "input": args.input,
@@ -306,9 +309,12 @@ def scale_drift(args: argparse.Namespace) -> int:
     truth = inputs.trajectory(args.gt) if args.gt else None  # read before the work
     before = Trajectory.of_graph(graph)
     with Progress(enabled=_talks(args)) as progress:
-        correction = correct_scale_drift(
-            graph, args.scale_information, args.convention, callback=progress, **_solving(args)
-        )
+        try:
+            correction = correct_scale_drift(
+                graph, args.scale_information, args.convention, callback=progress, **_solving(args)
+            )
+        except ValueError as error:  # a graph it cannot correct (SE2)
+            raise UsageError(f"{args.input}: {error}") from None
     summary = correction.result.summary
     _note_interruption(progress, summary)
     # Lifted by the reader (a file mixing SE3 and Sim3) or by the correction (SE3 only).

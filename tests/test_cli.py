@@ -499,6 +499,11 @@ def test_convert_between_formats(tmp_path):
     assert np.allclose(kitti[:, :, :3] @ np.swapaxes(kitti[:, :, :3], 1, 2), np.eye(3), atol=1e-9)
     unknown = run("convert", EXAMPLE, tmp_path / "p.xyz", check_exit=2)
     assert "--to" in unknown.stderr
+    source, _, _ = monocular_file(tmp_path)  # SE3 odometry and Sim3 loops: a Sim3 graph
+    refused = run("convert", source, tmp_path / "m.graph", check_exit=2)
+    assert (
+        f"posegraph: error: {source}: TORO has no Sim3 lines; write g2o instead" in refused.stderr
+    )
 
 
 def test_plot_overlays_graphs(tmp_path):
@@ -704,6 +709,7 @@ def test_scale_drift_command_rejects_false_loops(tmp_path):
 
 
 def test_scale_drift_warns_that_a_file_of_se3_edges_only_carries_no_scale_change(tmp_path):
+    """A file of SE3 edges only gets a warning; an SE2 file is refused, naming it."""
     warning = "no Sim3 edge: each loop closure only says that its ends share one scale"
     se3_only = run("scale-drift", EXAMPLE)
     assert f"posegraph: warning: {EXAMPLE}: {warning}" in se3_only.stderr
@@ -711,6 +717,10 @@ def test_scale_drift_warns_that_a_file_of_se3_edges_only_carries_no_scale_change
     source, truth = tmp_path / "mono.g2o", tmp_path / "gt.tum"
     write_sequence(monocular_sequence(drift=0.01, seed=1), str(source), str(truth))
     assert "warning" not in run("scale-drift", source).stderr
+    planar = run("scale-drift", EXAMPLE_2D, check_exit=2)
+    assert (
+        f"{EXAMPLE_2D}: scale-drift correction needs an SE3 or Sim3 graph, not SE2" in planar.stderr
+    )
 
 
 def test_reports_give_the_scale_information_of_lifted_se3_odometry(tmp_path):
