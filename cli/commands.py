@@ -12,7 +12,7 @@ import numpy as np
 
 import posegraph
 from posegraph.conversion import convert as convert_graph
-from posegraph.conversion import load_trajectory, output_format
+from posegraph.conversion import load_trajectory, output_format, unwritable_to
 from posegraph.doctor import diagnose
 from posegraph.evaluation import evaluate
 from posegraph.io import ReadOptions, ReadResult, read_graph
@@ -112,6 +112,14 @@ def _check_output(
         raise UsageError(f"{path}: is a folder, not a file")
 
 
+def _check_writable(source: str, graph: posegraph.PoseGraph, path: str | None, **format) -> None:
+    """Fail before any work if the graph read from ``source`` cannot be written to ``path``
+    (``posegraph.conversion.unwritable_to``; ``format``: its ``to`` and ``group``)."""
+    reason = None if path is None else unwritable_to(graph, path, **format)
+    if reason is not None:
+        raise UsageError(f"{source}: {reason}")
+
+
 def optimize(args: argparse.Namespace) -> int:
     _refuse_to_overwrite(args.input, args.output, args.overwrite)
     _refuse_to_overwrite(args.input, args.covariances, args.overwrite)
@@ -126,6 +134,7 @@ def optimize(args: argparse.Namespace) -> int:
             graph.fix(args.fix)
         except KeyError as error:
             raise UsageError(f"--fix: {error.args[0]}") from None
+    _check_writable(args.input, graph, args.output)
     before = graph.copy()
     with Progress(enabled=_talks(args)) as progress:
         result = posegraph.optimize(graph, callback=progress, **_solving(args))
@@ -222,12 +231,10 @@ def convert(args: argparse.Namespace) -> int:
         raise UsageError(f"{error}; say --to g2o|toro|tum|kitti") from None
     inputs = _Inputs(args)
     graph = inputs.graph(args.input).graph
-    try:
-        written = convert_graph(
-            graph, args.output, args.to, args.sim3_dialect, args.g2o_rotation_information
-        )
-    except ValueError as error:  # what the output format cannot hold
-        raise UsageError(f"{args.input}: {error}") from None
+    _check_writable(args.input, graph, args.output, to=args.to)
+    written = convert_graph(
+        graph, args.output, args.to, args.sim3_dialect, args.g2o_rotation_information
+    )
     record = {
         "command": "convert",
         "input": args.input,
@@ -306,6 +313,8 @@ def scale_drift(args: argparse.Namespace) -> int:
     graph = read.graph
     if graph.group is posegraph.SE3 and _talks(args):
         warn(f"{args.input}: {NO_SIM3_EDGE}")
+    if graph.group is not posegraph.SE2:  # refused below, by the correction
+        _check_writable(args.input, graph, args.output, group=posegraph.Sim3)
     truth = inputs.trajectory(args.gt) if args.gt else None  # read before the work
     before = Trajectory.of_graph(graph)
     with Progress(enabled=_talks(args)) as progress:

@@ -7,9 +7,10 @@ from collections.abc import Callable
 from pathlib import Path
 
 from .graph import PoseGraph
-from .io import ReadResult, read_graph, write_graph
+from .io import ReadResult, read_graph, unwritable, write_graph
 from .io.errors import GraphFileError
 from .io.parsing import read_lines
+from .lie import LieGroup
 from .trajectory_io import Trajectory, read_trajectory, write_trajectory
 
 SUFFIX_FORMATS = {
@@ -50,6 +51,15 @@ def input_format(path: str) -> str:
     if len(first) in (8, 12):
         return "tum" if len(first) == 8 else "kitti"
     raise GraphFileError(path, lines[0][0], "not a graph, TUM (8 columns) or KITTI (12) line")
+
+
+def unwritable_to(
+    graph: PoseGraph, path: str, to: str | None = None, group: type[LieGroup] | None = None
+) -> str | None:
+    """Why ``convert`` cannot write ``graph`` (or the graph lifted to ``group``) to ``path``,
+    or None if it can (``posegraph.io.unwritable``: every graph has a trajectory)."""
+    file_format = output_format(path, to)
+    return unwritable(graph, file_format, group) if file_format in GRAPH_FORMATS else None
 
 
 def convert(

@@ -506,6 +506,47 @@ def test_convert_between_formats(tmp_path):
     )
 
 
+def test_an_output_that_cannot_hold_the_graph_is_refused_before_any_work(
+    tmp_path, monkeypatch, capsys
+):
+    """A Sim3 graph with priors has no g2o lines (nor a graph with priors or FIX lines TORO
+    ones): optimize and scale-drift say so, naming the input, before optimising, not after;
+    its trajectory can be written."""
+    from posegraph_cli import main
+
+    import posegraph.scale_drift
+
+    source, _, _ = monocular_file(tmp_path)
+    lines = open(source).read().splitlines()
+    information = " ".join("1" if r == c else "0" for r in range(6) for c in range(r, 6))
+    prior = f"EDGE_SE3_PRIOR 0 0 0 0 0 0 0 0 1 {information}"
+    with_prior = tmp_path / "mono_prior.g2o"
+    with_prior.write_text("\n".join(["PARAMS_SE3OFFSET 0 0 0 0 0 0 0 1", *lines, prior]) + "\n")
+    fixed = tmp_path / "fixed.g2o"
+    fixed.write_text(open(EXAMPLE_2D).read() + "FIX 3\n")
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("optimised a graph whose result could not be written")
+
+    optimize = posegraph.optimize
+    monkeypatch.setattr(posegraph, "optimize", no_work)
+    monkeypatch.setattr(posegraph.scale_drift, "optimize", no_work)
+    refusals = [
+        ("optimize", with_prior, "out.g2o", "g2o has no Sim3 prior line"),
+        ("scale-drift", with_prior, "out.g2o", "g2o has no Sim3 prior line"),
+        ("optimize", fixed, "out.graph", "TORO has no prior or FIX lines"),
+    ]
+    for command, path, output, reason in refusals:
+        assert main.main([command, str(path), "-o", str(tmp_path / output)]) == 2
+        refused = capsys.readouterr()
+        assert refused.out == "" and refused.err.count("\n") == 1, refused
+        assert refused.err.startswith(f"posegraph: error: {path}: {reason}"), refused.err
+        assert not (tmp_path / output).exists()
+    monkeypatch.setattr(posegraph, "optimize", optimize)
+    assert main.main(["optimize", str(with_prior), "-o", str(tmp_path / "poses.tum")]) == 0
+    assert np.loadtxt(tmp_path / "poses.tum").shape == (300, 8)
+
+
 def test_plot_overlays_graphs(tmp_path):
     optimised, figure = tmp_path / "opt.g2o", tmp_path / "overlay.png"
     run("optimize", EXAMPLE_2D, "-o", optimised)

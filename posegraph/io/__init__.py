@@ -2,7 +2,7 @@
 
 from .errors import GraphFileError
 from .reader import ReadOptions, ReadResult, read_graph
-from .writer import format_g2o, format_toro, write_graph
+from .writer import format_g2o, format_toro, unwritable, write_graph
 
 __all__ = [
     "GraphFileError",
@@ -11,5 +11,6 @@ __all__ = [
     "format_g2o",
     "format_toro",
     "read_graph",
+    "unwritable",
     "write_graph",
 ]

@@ -110,10 +110,7 @@ def format_g2o(
             "EDGE_SE3_PRIOR", [ids[priors.i], np.zeros(len(priors), int)], prior_numbers
         )
     else:
-        if len(priors):
-            raise ValueError(
-                "g2o has no Sim3 prior line; write the priors' graph as SE3 or drop them"
-            )
+        _refuse_unwritable(graph, "g2o")
         if sim3_dialect not in ("a", "b"):
             raise ValueError(f"Sim3 dialect is 'a' or 'b', not {sim3_dialect!r}")
         # g2o stores the world → camera element Sᵢ = Xᵢ⁻¹ and the edge Z = (our measurement)⁻¹,
@@ -134,12 +131,33 @@ def format_g2o(
     return "\n".join(lines) + "\n"
 
 
+def unwritable(
+    graph: PoseGraph, file_format: str, group: type[LieGroup] | None = None
+) -> str | None:
+    """Why ``file_format`` ("g2o" or "toro") cannot hold ``graph``, or the graph lifted to
+    ``group``; None if it can. TORO has no Sim3, prior or FIX lines; g2o has no Sim3 prior."""
+    group = graph.group if group is None else group
+    if file_format == "toro" and group is Sim3:
+        return "TORO has no Sim3 lines; write g2o instead"
+    if file_format == "toro" and (len(graph.priors) or graph.fixed.any()):
+        return "TORO has no prior or FIX lines; write g2o to keep them"
+    if file_format == "g2o" and group is Sim3 and len(graph.priors):
+        return (
+            "g2o has no Sim3 prior line; write the poses as TUM or KITTI, or the graph without"
+            " its priors"
+        )
+    return None
+
+
+def _refuse_unwritable(graph: PoseGraph, file_format: str) -> None:
+    reason = unwritable(graph, file_format)
+    if reason is not None:
+        raise ValueError(reason)
+
+
 def format_toro(graph: PoseGraph) -> str:
     """The graph as TORO text (VERTEX2/EDGE2 or VERTEX3/EDGE3, then EQUIV lines)."""
-    if graph.group is Sim3:
-        raise ValueError("TORO has no Sim3 lines; write g2o instead")
-    if len(graph.priors) or graph.fixed.any():
-        raise ValueError("TORO has no prior or FIX lines; write g2o to keep them")
+    _refuse_unwritable(graph, "toro")
     ids, edges = graph.node_ids, graph.edges
     i, j = ids[edges.i], ids[edges.j]
     if graph.group is SE2:
