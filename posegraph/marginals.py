@@ -81,8 +81,10 @@ def marginals(
         edge_weights, prior_weights = graph.solution.weights_for(graph.edges, graph.priors)
         if np.any(edge_weights != 1.0) or np.any(prior_weights != 1.0):
             graph = graph.weighted(edge_weights, prior_weights)
-    if require_measured and undetermined_direction(graph, values, linear_solver) is not None:
-        raise singular_information(graph, values)
+    if require_measured:
+        direction = undetermined_direction(graph, values, linear_solver)
+        if direction is not None:
+            raise singular_information(graph, direction=direction)
     groups = index[None, :] if joint else index[:, None]
     # Solves serve any factor, so the last least-squares solve's normal equations do (a back
     # end reading its newest pose's covariance after each step); for selected inversion, new

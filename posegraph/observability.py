@@ -177,12 +177,16 @@ def describe_moving(graph: PoseGraph, direction: np.ndarray, shown: int = 3) -> 
     )
 
 
-def singular_information(graph: PoseGraph, values: LieGroup | None = None) -> NotPositiveDefinite:
+def singular_information(
+    graph: PoseGraph, values: LieGroup | None = None, direction: np.ndarray | None = None
+) -> NotPositiveDefinite:
     """The error for a singular H: it names the first nodes with directions that no measurement
-    reaches (``unmeasured_directions``), or else, given the ``values``, the nodes that an
-    undetermined direction moves (``undetermined_direction``), or else the common cause."""
+    reaches (``unmeasured_directions``), or else the nodes that an undetermined ``direction``
+    moves (if not given, one found at the ``values``: ``undetermined_direction``), or else the
+    common cause."""
     counts = unmeasured_directions(graph)
-    direction = None if counts.any() or values is None else undetermined_direction(graph, values)
+    if direction is None and not counts.any() and values is not None:
+        direction = undetermined_direction(graph, values)
     if counts.any():
         where = describe_unmeasured(graph, counts)
     elif direction is not None:
