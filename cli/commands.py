@@ -17,6 +17,7 @@ from posegraph.doctor import diagnose
 from posegraph.evaluation import evaluate
 from posegraph.io import ReadOptions, ReadResult, read_graph
 from posegraph.io.covariances import write_covariances
+from posegraph.lie import LieGroup
 from posegraph.solvers import SolverOptions, Summary
 from posegraph.sparse_cholesky import NotPositiveDefinite
 from posegraph.trajectory_io import Trajectory
@@ -112,10 +113,16 @@ def _check_output(
         raise UsageError(f"{path}: is a folder, not a file")
 
 
-def _check_writable(source: str, graph: posegraph.PoseGraph, path: str | None, **format) -> None:
-    """Fail before any work if the graph read from ``source`` cannot be written to ``path``
-    (``posegraph.conversion.unwritable_to``; ``format``: its ``to`` and ``group``)."""
-    reason = None if path is None else unwritable_to(graph, path, **format)
+def _check_writable(
+    source: str,
+    graph: posegraph.PoseGraph,
+    path: str | None,
+    to: str | None = None,
+    group: type[LieGroup] | None = None,
+) -> None:
+    """Fail before any work if the graph read from ``source`` (lifted to ``group``, if given)
+    cannot be written to ``path`` as ``to`` (``posegraph.conversion.unwritable_to``)."""
+    reason = None if path is None else unwritable_to(graph, path, to, group)
     if reason is not None:
         raise UsageError(f"{source}: {reason}")
 
