@@ -12,7 +12,7 @@ from posegraph.alignment import umeyama
 from posegraph.chordal import chordal_values
 from posegraph.graph import PoseGraph
 from posegraph.io import ReadOptions
-from posegraph.lie import Sim3
+from posegraph.lie import SE3, Sim3
 from posegraph.lifting import default_scale_information
 from posegraph.scale_drift import convert_convention, correct_scale_drift, lift_graph
 
@@ -98,6 +98,27 @@ def test_an_se3_graph_is_lifted_with_scale_one():
     np.testing.assert_array_equal(lifted.edges.information[:, 6, 6], 123.0)
     np.testing.assert_array_equal(
         lifted.edges.information[:, :6, :6], sequence.odometry.edges.information
+    )
+
+
+def test_a_file_whose_sim3_lines_are_all_skipped_reads_as_se3(tmp_path):
+    """With --lenient, SE3 odometry whose only Sim3 line is malformed is the SE3 graph of the
+    lines kept, as the same file without that line: not lifted to Sim3, no Sim3 dialect."""
+    sequence = monocular_sequence(num_poses=60, seed=5)
+    path, truth = tmp_path / "mono.g2o", tmp_path / "gt.tum"
+    write_sequence(sequence, str(path), str(truth))
+    lines = open(path).read().splitlines()
+    se3_lines = [line for line in lines if not line.startswith("EDGE_SIM3")]
+    loop = next(line for line in lines if line.startswith("EDGE_SIM3"))
+    path.write_text("\n".join([*se3_lines, loop + " 7"]) + "\n")
+    read = posegraph.read_graph(str(path), ReadOptions(lenient=True))
+    assert [why for why, _, _ in read.skipped_by_reason()] == [
+        "EDGE_SIM3:EXPMAP: expected 38 or 37 numbers after the tag, found 39"
+    ]
+    assert read.graph.group is SE3
+    assert read.sim3_dialect is None and read.lifted_scale_information is None
+    np.testing.assert_allclose(  # through the file's quaternions
+        read.graph.values.as_matrix(), sequence.odometry.values.as_matrix(), atol=1e-12
     )
 
 

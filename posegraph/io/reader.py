@@ -366,6 +366,13 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
             _convert(spec, rows, options, checker, collected)
     _apply_prior_offsets(collected, checker)
 
+    sim3_rows = [
+        rows
+        for rows, *_ in collected.vertices + collected.edges
+        if ALL_TAGS[rows.tag].group is Sim3
+    ]
+    if group is Sim3 and not sim3_rows:
+        group = SE3  # every Sim3 line was skipped (lenient): the SE3 lines are the graph
     lifted_scale_information = None
     if group is Sim3:
         lifted_scale_information = _lift_se3_records(collected, options.scale_information)
@@ -376,8 +383,8 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
     for rows in collected.fixes + collected.equivalences + [r for r, _ in collected.parameters]:
         tag_counts[rows.tag] += len(rows)
     sim3_dialect = None
-    if "VERTEX_SIM3:EXPMAP" in lines_by_tag or "EDGE_SIM3:EXPMAP" in lines_by_tag:
-        widths = {rows.numbers.shape[1] for rows, *_ in collected.vertices + collected.edges}
+    if sim3_rows:
+        widths = {rows.numbers.shape[1] for rows in sim3_rows}
         sim3_dialect = "a" if widths & {9, 38} else "b"
     file_format = "toro" if any(t in TORO_TAGS for t in lines_by_tag) else "g2o"
     return ReadResult(
