@@ -277,7 +277,10 @@ def eval(args: argparse.Namespace) -> int:  # noqa: A001 - the subcommand's name
     inputs = _Inputs(args)
     estimate = inputs.trajectory(args.estimate)
     truth = inputs.trajectory(args.ground_truth)
-    evaluation = evaluate(estimate, truth, args.align, args.delta, args.max_time_difference)
+    try:
+        evaluation = evaluate(estimate, truth, args.align, args.delta, args.max_time_difference)
+    except ValueError as error:  # the two do not pair, or cannot be aligned as asked
+        raise UsageError(f"{args.estimate} against {args.ground_truth}: {error}") from None
     if args.plot:
         from posegraph.plotting import plot_trajectories
 

@@ -600,7 +600,16 @@ def test_eval_reports_ate_and_rpe(tmp_path):
     text = run("eval", optimised, truth_path).stdout
     assert "ATE" in text and "RPE" in text
     too_far = run("eval", optimised, truth_path, "--delta", 160, check_exit=2)
-    assert "the RPE step is 1 to 159 poses (of the 160 matched), not 160" in too_far.stderr
+    assert (
+        f"posegraph: error: {optimised} against {truth_path}: the RPE step is 1 to 159 poses (of"
+        " the 160 matched), not 160" in too_far.stderr
+    )
+    truncated = tmp_path / "truncated.tum"
+    truncated.write_text("".join(open(truth_path).readlines()[:2]))
+    unpaired = run("eval", optimised, truncated, check_exit=2)
+    assert unpaired.stderr.startswith(
+        f"posegraph: error: {optimised} against {truncated}: only 2 poses pair"
+    ), unpaired.stderr
 
 
 def test_numbers_that_overflow_are_reported_and_nothing_is_written(tmp_path):
