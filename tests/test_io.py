@@ -441,6 +441,16 @@ def test_lenient_mode_skips_and_reports(tmp_path):
     ]
     assert result.graph.num_edges == 2
     assert result.tag_counts == {"VERTEX_SE2": 3, "EDGE_SE2": 2}
+    # A file of which nothing could be read is an error, not an empty graph.
+    nothing = tmp_path / "nothing.g2o"
+    nothing.write_text("VERTEX_SE2 0 0 0\nROBOTLASER1 whatever\n")
+    with pytest.raises(GraphFileError) as raised:
+        read_graph(str(nothing), ReadOptions(lenient=True))
+    assert str(raised.value) == (
+        f"{nothing}: holds no vertex or edge that could be read (2 line(s) skipped: 1 × unknown"
+        " tag 'ROBOTLASER1' (first at line 2); 1 × VERTEX_SE2: expected 4 numbers after the tag,"
+        " found 3 (first at line 1))"
+    )
 
 
 def test_writes_are_atomic_and_leave_no_temporary_files(tmp_path):

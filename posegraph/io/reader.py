@@ -387,7 +387,7 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
         widths = {rows.numbers.shape[1] for rows in sim3_rows}
         sim3_dialect = "a" if widths & {9, 38} else "b"
     file_format = "toro" if any(t in TORO_TAGS for t in lines_by_tag) else "g2o"
-    return ReadResult(
+    read = ReadResult(
         graph,
         path,
         file_format,
@@ -397,6 +397,11 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
         sim3_dialect,
         lifted_scale_information,
     )
+    if graph.num_nodes == 0:  # lenient reading skipped every vertex and edge line
+        raise GraphFileError(
+            path, None, f"holds no vertex or edge that could be read ({read.skipped_report()})"
+        )
+    return read
 
 
 def _assemble(group, collected: _Collected, checker: LineChecker):
