@@ -161,29 +161,42 @@ def _edge2_order_advice(rows: Rows, order: str) -> str:
     )
 
 
-def _check_information(rows: Rows, measurements, information, checker: LineChecker, options):
-    bad, why = information_problems(information)
+def _drop(rows: Rows, measurements, information, bad: np.ndarray, message, checker: LineChecker):
+    """The rows, measurements and information where ``bad`` does not hold; the rows where it
+    does go to ``checker`` with ``message(k)``."""
     if not bad.any():
         return rows, measurements, information
-    advice = _edge2_order_advice(rows, options.edge2_order) if rows.tag == "EDGE2" else ""
-    kept = checker.keep_good(rows, bad, lambda k: f"information matrix is {why(k)}{advice}")
-    return kept, measurements[~bad], information[~bad]
+    return checker.keep_good(rows, bad, message), measurements[~bad], information[~bad]
+
+
+def _check_information(rows: Rows, measurements, information, checker: LineChecker, options):
+    bad, why = information_problems(information)
+    advice = ""
+    if rows.tag == "EDGE2" and bad.any():
+        advice = _edge2_order_advice(rows, options.edge2_order)
+    return _drop(
+        rows,
+        measurements,
+        information,
+        bad,
+        lambda k: f"information matrix is {why(k)}{advice}",
+        checker,
+    )
 
 
 def _check_overflow(rows: Rows, measurements, information, checker: LineChecker):
     """The edges whose information at their start node is finite (``overflowing_edges``)."""
-    bad = overflowing_edges(measurements, information)
-    if not bad.any():
-        return rows, measurements, information
-    kept = checker.keep_good(
+    return _drop(
         rows,
-        bad,
+        measurements,
+        information,
+        overflowing_edges(measurements, information),
         lambda k: (
             "a number is out of range: the edge's translation weighed by its information "
             f"overflows (Ad(Z⁻¹)ᵀ Ω Ad(Z⁻¹) at node {rows.ids(0)[k]})"
         ),
+        checker,
     )
-    return kept, measurements[~bad], information[~bad]
 
 
 def _pad_missing_information(entries: list, spec: TagFormat) -> list:
