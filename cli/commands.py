@@ -144,7 +144,10 @@ def optimize(args: argparse.Namespace) -> int:
     _check_writable(args.input, graph, args.output)
     before = graph.copy()
     with Progress(enabled=_talks(args)) as progress:
-        result = posegraph.optimize(graph, callback=progress, **_solving(args))
+        try:
+            result = posegraph.optimize(graph, callback=progress, **_solving(args))
+        except ValueError as error:  # values the initialisation cannot hold, say
+            raise UsageError(f"{args.input}: {error}") from None
     summary = result.summary
     _note_interruption(progress, summary)
     if not math.isfinite(summary.final_error):
@@ -332,7 +335,7 @@ def scale_drift(args: argparse.Namespace) -> int:
             correction = correct_scale_drift(
                 graph, args.scale_information, args.convention, callback=progress, **_solving(args)
             )
-        except ValueError as error:  # a graph it cannot correct (SE2)
+        except ValueError as error:  # a graph it cannot correct (SE2), values beyond doubles
             raise UsageError(f"{args.input}: {error}") from None
     summary = correction.result.summary
     _note_interruption(progress, summary)

@@ -309,7 +309,8 @@ class PoseGraph:
         if not finite.all():
             raise ValueError(f"{describe(int(np.flatnonzero(~finite)[0]))} is not finite")
         corner, linear = given[:, -1, -1], given[:, :-1, :-1]
-        determinant = np.linalg.det(linear)
+        with np.errstate(over="ignore"):  # a Sim3 of scale e^300 has determinant +∞: accepted
+            determinant = np.linalg.det(linear)
         degenerate = np.flatnonzero(~(np.abs(corner - 1) <= 1e-4) | ~(determinant > 0))
         if degenerate.size:  # refused before the projection, which needs det > 0
             k = int(degenerate[0])

@@ -39,11 +39,29 @@ def initialize(graph: PoseGraph, method: str) -> LieGroup:
     i → i+1, bridging breaks through other edges), "spanning-tree" (compose along the most
     informative edges), "chordal" (``posegraph.chordal``) or "auto" (``choose``). The gauge
     nodes (``PoseGraph.gauge_nodes``: fixed nodes, and the lowest id of each component without a
-    prior) keep their values, so that a map given away from the origin stays where it is."""
+    prior) keep their values, so that a map given away from the origin stays where it is.
+    Raises ``ValueError`` naming the nodes to which the measurements compose values beyond
+    double precision (a Sim3 chain whose scales multiply past 1e308, say)."""
     if method == "auto":
         method = choose(graph)
     if method == "file":
         return graph.values
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        values = _composed_values(graph, method)
+        beyond = np.flatnonzero(~np.isfinite(values.as_matrix()).all(axis=(1, 2)))
+    if beyond.size:
+        named = ", ".join(str(node) for node in graph.node_ids[beyond[:3]])
+        nodes = f"node {named}" if beyond.size == 1 else f"nodes {named}"
+        more = f", … ({beyond.size} nodes)" if beyond.size > 3 else ""
+        raise ValueError(
+            f"the {method} initialisation composes the measurements to values beyond double"
+            f" precision at {nodes}{more}: a translation or scale too large to hold"
+        )
+    return values
+
+
+def _composed_values(graph: PoseGraph, method: str) -> LieGroup:
+    """The values of ``initialize`` by a method other than "file" and "auto"."""
     if method == "chordal":
         from .chordal import chordal_values
 

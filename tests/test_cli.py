@@ -20,8 +20,9 @@ from posegraph_datasets.outliers import add_false_loops
 from posegraph_datasets.paths import BENCHMARK_GRAPHS
 
 from posegraph.api import robust_mask
+from posegraph.graph import PoseGraph
 from posegraph.io import read_graph, write_graph
-from posegraph.lie import SE3
+from posegraph.lie import SE3, Sim3
 
 from .conftest import city_with_fixes, maps_joined_by_positions
 from .malformed import MALFORMED
@@ -633,6 +634,24 @@ def test_numbers_that_overflow_are_reported_and_nothing_is_written(tmp_path):
     assert any("residuals overflow" in problem for problem in problems)
     # The first-order test cannot be made where the Jacobians overflow: no false finding.
     assert not any("move together" in problem for problem in problems), problems
+
+
+def test_an_initialisation_beyond_double_precision_is_reported_naming_the_file(tmp_path):
+    """Sim3 odometry that multiplies the scale by e^200 at every step: composed from the first
+    pose, the fifth lies beyond double precision. One line names the file and the node."""
+    chain = PoseGraph(Sim3)
+    chain.add_nodes(np.arange(6), Sim3.identity((6,)))
+    scale_step = Sim3.exp(np.array([0, 0, 0, 0, 0, 0, 200.0]))
+    chain.add_edges(np.arange(5), np.arange(1, 6), scale_step, np.eye(7))
+    source, out = tmp_path / "scales.g2o", tmp_path / "out.g2o"
+    write_graph(chain, str(source))
+    failed = run("optimize", source, "-o", out, check_exit=2)
+    assert failed.stderr == (
+        f"posegraph: error: {source}: the odometry initialisation composes the measurements to"
+        " values beyond double precision at nodes 4, 5: a translation or scale too large to"
+        " hold\n"
+    )
+    assert not out.exists()
 
 
 def test_numeric_arguments_are_checked_by_the_parser():

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 import scipy.stats as scipy_stats
@@ -278,6 +280,32 @@ def test_covariances_of_a_map_that_can_turn_about_position_only_edges_can_be_ref
         posegraph.marginals(graph, [1048], require_measured=True)
     joined = maps_joined_by_positions(SE3, 3)
     assert posegraph.marginals(joined, [1048], require_measured=True)[0].max() < 10.0
+
+
+@pytest.mark.parametrize(
+    ("method", "nodes"),
+    [("odometry", "4, 5"), ("spanning-tree", "4, 5"), ("chordal", r"1, 2, 3, … \(5 nodes\)")],
+)
+def test_an_initialisation_beyond_double_precision_is_refused_naming_the_nodes(method, nodes):
+    """Sim3 edges that each multiply the scale by e^200 compose to e^800 at node 4 and e^1000
+    at node 5 (the loop 0 → 2 agrees with the chain): no double holds them. Chordal relaxation
+    solves for every translation at once, scaled by those scales, and loses all but node 0's."""
+    graph = PoseGraph(Sim3)
+    graph.add_nodes(np.arange(6))
+    scale_step = Sim3.exp(np.array([0, 0, 0, 0, 0, 0, 200.0]))
+    graph.add_edges(np.arange(5), np.arange(1, 6), scale_step, np.eye(7))
+    graph.add_edge(0, 2, scale_step @ scale_step, np.eye(7))
+    message = (
+        rf"the {method} initialisation composes the measurements to values beyond double"
+        rf" precision at nodes {nodes}: a translation or scale too large to hold"
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ValueError, match=message):
+            initialize(graph, method)
+        with pytest.raises(ValueError, match=message):
+            posegraph.optimize(graph, init=method)
+    assert not graph.initialized.any()  # nothing was set
 
 
 def test_auto_picks_chordal_for_loops_and_odometry_for_trees():

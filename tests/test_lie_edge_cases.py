@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import warnings
 from decimal import Decimal, localcontext
 from math import factorial
 
@@ -192,6 +193,19 @@ def test_sim3_from_general_homogeneous_matrix():
     s = Sim3.sample(np.random.default_rng(7))
     eade = s.as_matrix() / s.scale
     assert_same_element(Sim3.from_matrix(eade), s, atol=1e-13)
+
+
+@pytest.mark.parametrize("log_scale", [-250.0, 250.0])
+def test_sim3_from_matrix_takes_scales_whose_cube_is_beyond_double_precision(log_scale):
+    """det(sR) = s³ of e^±750 over- or underflows; the scale is still recovered, silently."""
+    s = Sim3(
+        SO3.exp(np.array([0.3, -0.2, 0.1])).rotation, np.array([1.0, 2.0, 3.0]), np.exp(log_scale)
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        back = Sim3.from_matrix(s.as_matrix())
+    assert np.log(back.scale) == pytest.approx(log_scale, rel=1e-14)
+    np.testing.assert_allclose(back.rotation, s.rotation, atol=1e-14)
 
 
 DIGITS = 700  # m_k(σ) by parts loses about k·|log₁₀ σ| digits to cancellation

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -11,6 +13,7 @@ from posegraph.io import read_graph
 from posegraph.lie import SE2, SE3
 from posegraph.linear import NormalEquations
 from posegraph.solvers import SolverOptions, optimize
+from posegraph.solvers.optimize import NOT_FINITE
 from posegraph.solvers.options import DEFAULT_INITIAL_DAMPING
 from posegraph.sparse_cholesky import available_backends
 
@@ -158,6 +161,41 @@ def test_non_finite_steps_are_rejected(monkeypatch):
     assert first.damping == 2 * DEFAULT_INITIAL_DAMPING  # the rejection doubled λ
     assert np.isfinite(result.values.as_matrix()).all()
     assert result.summary.converged
+
+
+def _sim3_chain_beyond_double_precision() -> posegraph.PoseGraph:
+    """Four edges that each multiply the scale by e^200, from values at the identity: the
+    optimum puts node 4 at scale e^800, which no double holds (they end near e^709)."""
+    graph = posegraph.PoseGraph(posegraph.Sim3)
+    graph.add_nodes([0, 1, 2, 3, 4], posegraph.Sim3.identity((5,)))
+    scale_step = posegraph.Sim3.exp(np.array([0, 0, 0, 0, 0, 0, 200.0]))
+    graph.add_edges([0, 1, 2, 3], [1, 2, 3, 4], scale_step, np.eye(7))
+    return graph
+
+
+def test_steps_that_overflow_are_rejected_silently():
+    """The Gauss-Newton step lands at e^800: GN stops, saying why; LM damps its steps and
+    ends on values that double precision holds. Neither lets numpy's warnings through."""
+    graph = _sim3_chain_beyond_double_precision()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        gn = optimize(graph, SolverOptions(method="gn"))
+        lm = optimize(graph)
+    assert gn.summary.termination.startswith("step overflowed double precision")
+    assert gn.summary.final_error == gn.summary.initial_error
+    assert np.isfinite(lm.values.as_matrix()).all()
+    assert lm.summary.final_error < lm.summary.initial_error
+
+
+def test_an_error_that_is_not_finite_at_the_start_ends_the_run_at_once():
+    """A node at 1e200: its residuals' squares overflow. No step can be judged from there."""
+    graph = random_graph(SE2, 6, 2, seed=52, noise=0.1)
+    graph.values = graph.values.set_at(3, SE2.from_xytheta(np.array([1e200, 0.0, 0.0])))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # the start's own overflow
+        result = optimize(graph)
+    assert result.summary.termination == NOT_FINITE
+    assert not result.summary.converged and result.summary.num_iterations == 0
 
 
 def test_summary_reports_errors_and_phases():

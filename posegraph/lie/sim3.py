@@ -303,11 +303,13 @@ class Sim3(LieGroup):
 
     @classmethod
     def from_matrix(cls, matrix: np.ndarray) -> Sim3:
-        """From N = [[sR, t], [0, 1]]; a general last row is normalised away first."""
+        """From N = [[sR, t], [0, 1]]; a general last row is normalised away first. The scale
+        is ∛det(sR), taken through log|det| so that s³ may lie beyond double precision."""
         matrix = np.asarray(matrix, float)
         matrix = matrix / matrix[..., 3:, 3:]
         linear = matrix[..., :3, :3]
-        scale = np.cbrt(np.linalg.det(linear))
+        sign, log_determinant = np.linalg.slogdet(linear)
+        scale = sign * np.exp(log_determinant / 3.0)
         return cls(linear / scale[..., None, None], matrix[..., :3, 3], scale)
 
     @classmethod

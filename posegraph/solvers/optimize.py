@@ -46,6 +46,7 @@ Callback = Callable[[IterationRecord], bool | None]
 """Called after every iteration; returning True stops the run (termination ``STOPPED``)."""
 STOPPED = "stopped by callback"
 TIME_LIMIT = "time limit reached"
+NOT_FINITE = "the error at the start is not finite (values or residuals beyond double precision)"
 
 _PHASES = ("linearize", "assemble", "factorize", "solve", "other")
 
@@ -169,9 +170,12 @@ def optimize(
     initial_error = current.error
     history: list[IterationRecord] = []
 
-    if system.size == 0 or options.max_iterations == 0:
-        termination = "nothing to optimise" if system.size == 0 else "maximum iterations reached"
-        converged = system.size == 0
+    if system.size == 0:
+        termination, converged = "nothing to optimise", True
+    elif not np.isfinite(initial_error):
+        termination, converged = NOT_FINITE, False
+    elif options.max_iterations == 0:
+        termination, converged = "maximum iterations reached", False
     else:
         current, termination, converged = _iterate(
             graph, options, callback, system, weighting, clock, current, history
@@ -263,8 +267,12 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
             break
         trial = None
         if step_ok:
-            trial_values = current.values.retract(system.scatter(step))
-            trial = _Linearized(graph, trial_values, weighting)
+            # A step far beyond the quadratic model's reach (along a direction measured only
+            # weakly) can overflow, as a Sim3 scale of e^800: its error is then not finite,
+            # and the step is rejected.
+            with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+                trial_values = current.values.retract(system.scatter(step))
+                trial = _Linearized(graph, trial_values, weighting)
             clock.lap("linearize")
         step_norm = float(np.linalg.norm(step))
         accepted = trial is not None and np.isfinite(trial.error) and trial.error < current.error
@@ -287,11 +295,14 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
             break
         if not accepted:
             if not lm:
-                termination = (
-                    _singular_termination(graph)
-                    if singular
-                    else "step raised the error (Gauss-Newton)"
-                )
+                termination = "step raised the error (Gauss-Newton)"
+                if singular:
+                    termination = _singular_termination(graph)
+                elif trial is not None and not np.isfinite(trial.error):
+                    termination = (
+                        "step overflowed double precision (Gauss-Newton does not damp it,"
+                        " Levenberg-Marquardt does)"
+                    )
                 break
             if not np.isfinite(lam) or lam > options.max_diagonal:
                 termination = "damping exceeded its limit (no step lowers the error)"
