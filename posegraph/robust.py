@@ -44,7 +44,7 @@ class RobustKernel:
         """ρ(s)."""
         c2 = self.width**2
         if self.name == "huber":
-            return np.where(s <= c2, s, 2.0 * self.width * np.sqrt(s) - c2)
+            return np.where(s <= c2, s, 2.0 * self.width * np.sqrt(np.maximum(s, c2)) - c2)
         if self.name == "cauchy":
             return c2 * np.log1p(s / c2)
         if self.name == "geman-mcclure":

@@ -404,6 +404,18 @@ def test_kernel_weight_is_the_derivative_of_its_cost(name):
     assert np.all(np.diff(kernel.cost(s[:200])) >= 0)
 
 
+@pytest.mark.parametrize("name", KERNELS)
+def test_kernels_take_a_square_that_rounding_made_negative(name):
+    """s = rᵀΩr is −1e-17 when Ω's least eigenvalue is −1e-17 (information may be singular
+    to rounding): ρ(s) ≈ s and w = 1 there, without numpy's warnings."""
+    kernel = RobustKernel(name, 1.7)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        cost, weight = kernel.cost(np.array([-1e-17])), kernel.weight(np.array([-1e-17]))
+    np.testing.assert_allclose(cost, -1e-17, atol=1e-16)
+    np.testing.assert_allclose(weight, 1.0, rtol=1e-12)
+
+
 @pytest.mark.parametrize("dof", [1, 2, 3, 6, 7])
 def test_default_width_is_the_chi2_quantile(dof):
     from scipy.stats import chi2
