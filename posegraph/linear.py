@@ -238,6 +238,12 @@ class BlockPattern:
         largest = float(diagonal.max(initial=0.0))
         return np.where(diagonal == 0, largest if 0 < largest < np.inf else 1.0, diagonal)
 
+    def pivot_shares(self, data: np.ndarray) -> np.ndarray:
+        """Per column, its pivot in the last factorisation over its entry of ``ridge_scale``
+        (of ``data``, the matrix factorised before any ridge): near zero where the columns
+        eliminated before it nearly span it (``sparse_cholesky``)."""
+        return self.cholesky.pivots() / self.ridge_scale(data)
+
     def diagonal(self, data: np.ndarray) -> np.ndarray:
         """diag(H) from its CSC data."""
         return data[self.diagonal_positions]
@@ -335,14 +341,22 @@ class NormalEquations(BlockPattern):
 
 
 def factorized_information(
-    graph: PoseGraph, values: LieGroup, system: NormalEquations, regularize: bool = False
+    graph: PoseGraph,
+    values: LieGroup,
+    system: NormalEquations,
+    regularize: bool = False,
+    least_share: float = 0.0,
 ) -> Linearization:
     """The information matrix H = Σ Jᵀ Ω J of ``graph`` at ``values`` (priors included, gauge
     nodes held), assembled into ``system`` (normal equations of this graph's structure) and
     factorised (with ``regularize``, by ``factorize_regularized``); returns the between edges'
-    linearisation."""
+    linearisation. With ``least_share``, a pivot of at most that share of its diagonal entry
+    (``NormalEquations.pivot_shares``: H singular to working precision, which one backend
+    may factorise where another fails) raises ``NotPositiveDefinite`` too."""
     between = linearize_between(values, graph.edges)
     priors = linearize_priors(values, graph.priors)
     data, _ = system.assemble(between, graph.edges.information, priors, graph.priors.information)
     (system.factorize_regularized if regularize else system.factorize)(data)
+    if least_share and system.size and system.pivot_shares(data).min() <= least_share:
+        raise NotPositiveDefinite(f"a pivot of at most {least_share:g} of its diagonal entry")
     return between
