@@ -198,7 +198,7 @@ def optimize(
         result, edge_weights, prior_weights = _robust_solve(
             graph, kernel, measured, options, callback, standing
         )
-        if result.summary.termination in (STOPPED, TIME_LIMIT):
+        if result.summary.termination in (STOPPED, TIME_LIMIT) or options.max_iterations == 0:
             gnc_problem = None  # its decisions are not final
     result.summary.initialization = init
     result.summary.initialization_time = init_time

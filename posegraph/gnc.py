@@ -159,7 +159,9 @@ def tls_objective(
 def _stages(graph, mask, width_sq, options, start: Result, restart: bool, run: _Run):
     """GNC rounds from the least-squares solution ``start``; returns (result, weights)."""
     stage_options = dataclasses.replace(
-        options, max_iterations=STAGE_ITERATIONS, relative_decrease=STAGE_RELATIVE_DECREASE
+        options,
+        max_iterations=min(options.max_iterations, STAGE_ITERATIONS),
+        relative_decrease=STAGE_RELATIVE_DECREASE,
     )
     result, rounds = start, 0
     s = between_squares(result.values, graph.edges)
@@ -205,6 +207,10 @@ def gnc_tls(
     run stops after that iteration, with the values reached and the edges of the mask with
     s > c² there rejected (termination ``STOPPED`` or ``TIME_LIMIT``).
 
+    ``options.max_iterations`` caps every solve (GNC's stages at ``STAGE_ITERATIONS``). With
+    0, nothing is searched: the values stand, and the edges of the mask with s > c² at them are
+    rejected, as when the run is stopped.
+
     ``kept``, decisions known to stand (the edges to keep, ``posegraph.api``), skips the search:
     the kept edges are solved for in least squares, and the others are rejected."""
     options = options or SolverOptions()
@@ -215,7 +221,10 @@ def gnc_tls(
     run = _Run(callback)
     initial_error = 0.5 * tls_objective(graph, graph.values, mask, width_sq)
     try:
-        if kept is None:
+        if kept is None and options.max_iterations == 0:  # no solve moves: the values stand
+            result = run.solve(graph, options, "least squares")
+            kept = ~mask | (between_squares(result.values, graph.edges) <= width_sq)
+        elif kept is None:
             kept, searched = _search(graph, mask, width_sq, search, run)
             work = graph.with_edges(kept)
             work.set_values(searched.values)

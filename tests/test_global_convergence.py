@@ -866,6 +866,25 @@ def test_a_gnc_run_reports_every_solve_and_stops_when_asked():
     assert stopped.summary.rejected_edges == np.flatnonzero(loops & (s > width_sq)).tolist()
 
 
+def test_gnc_without_iterations_keeps_the_values_and_rejects_what_misfits_there():
+    """``max_iterations=0`` moves nothing, as in least squares: the values are the start's
+    (odometry), the loops with s > c² there are rejected, and the decisions do not stand for
+    a later call. Before, GNC's chordal restarts moved the values, unsolved."""
+    graph, _ = manhattan_world(num_poses=100, seed=68)
+    corrupted, _ = add_false_loops(graph, 0.2, seed=3)
+    start = initialize(corrupted, "odometry")
+    options = posegraph.SolverOptions(max_iterations=0)
+    result = posegraph.optimize(corrupted, robust="gnc", options=options)
+    np.testing.assert_array_equal(result.values.as_matrix(), start.as_matrix())
+    assert result.summary.final_error == result.summary.initial_error
+    assert result.summary.termination == "maximum iterations reached"
+    s = between_squares(start, corrupted.edges)
+    loops = robust_mask(corrupted, "loops")
+    misfit = np.flatnonzero(loops & (s > default_width(3, GNC_QUANTILE) ** 2))
+    assert misfit.size and result.summary.rejected_edges == misfit.tolist()
+    assert corrupted.solution.gnc is None
+
+
 def test_a_time_limit_bounds_the_whole_gnc_run():
     """``time_limit`` is the run's, not each solve's: a twentieth of the run's own time ends it
     early, with the termination saying so."""
