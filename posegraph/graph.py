@@ -43,6 +43,14 @@ def node_id_array(node_ids: Iterable[int] | np.ndarray | int) -> np.ndarray:
     return given.astype(np.int64)
 
 
+def named_nodes(node_ids: np.ndarray, shown: int = 3) -> str:
+    """Node ids as a phrase: "node 4", or "nodes 4, 6, 8, … (20 nodes)" past ``shown``."""
+    named = ", ".join(str(node) for node in node_ids[:shown])
+    if len(node_ids) == 1:
+        return f"node {named}"
+    return f"nodes {named}" + (f", … ({len(node_ids)} nodes)" if len(node_ids) > shown else "")
+
+
 def information_problems(information: np.ndarray) -> tuple[np.ndarray, Callable[[int], str]]:
     """Which of (n, d, d) information matrices are refused, and why the k-th is: not finite,
     not symmetric (|Ω − Ωᵀ| > 1e-9 max|Ω|), zero, or not positive semi-definite

@@ -13,7 +13,7 @@ import scipy.sparse
 import scipy.sparse.csgraph
 
 from .alignment import similarity_fit
-from .graph import PoseGraph
+from .graph import PoseGraph, named_nodes
 from .lie import LieGroup
 
 _ANCHOR_WEIGHT = 1e-9  # known values hang off the virtual root first
@@ -50,12 +50,10 @@ def initialize(graph: PoseGraph, method: str) -> LieGroup:
         values = _composed_values(graph, method)
         beyond = np.flatnonzero(~np.isfinite(values.as_matrix()).all(axis=(1, 2)))
     if beyond.size:
-        named = ", ".join(str(node) for node in graph.node_ids[beyond[:3]])
-        nodes = f"node {named}" if beyond.size == 1 else f"nodes {named}"
-        more = f", … ({beyond.size} nodes)" if beyond.size > 3 else ""
         raise ValueError(
             f"the {method} initialisation composes the measurements to values beyond double"
-            f" precision at {nodes}{more}: a translation or scale too large to hold"
+            f" precision at {named_nodes(graph.node_ids[beyond])}: a translation or scale too"
+            " large to hold"
         )
     return values
 

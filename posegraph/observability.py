@@ -26,7 +26,7 @@ import numpy as np
 import scipy.sparse
 
 from .factors import Linearization, between_jacobians, relative_poses
-from .graph import PoseGraph, start_information
+from .graph import PoseGraph, named_nodes, start_information
 from .lie import LieGroup
 from .linear import NormalEquations
 from .sparse_cholesky import NotPositiveDefinite
@@ -164,12 +164,7 @@ def describe_moving(graph: PoseGraph, direction: np.ndarray, shown: int = 3) -> 
     4, 6, 8, … (20 nodes) move together without changing any residual to first order, …"."""
     size = np.abs(direction).max(axis=1)
     nodes = graph.node_ids[size > MOVES * size.max()]
-    named = ", ".join(str(node) for node in nodes[:shown])
-    if nodes.size == 1:
-        who = f"node {named} moves"
-    else:
-        who = f"nodes {named}" + (f", … ({nodes.size} nodes)" if nodes.size > shown else "")
-        who += " move together"
+    who = named_nodes(nodes, shown) + (" moves" if nodes.size == 1 else " move together")
     return (
         f"{who} without changing any residual to first order, as a part of a map joined to the"
         " rest only by position-only edges can turn about them"
