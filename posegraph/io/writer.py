@@ -84,6 +84,7 @@ def format_g2o(
     graph: PoseGraph, g2o_rotation_information: bool = False, sim3_dialect: str = "a"
 ) -> str:
     """The graph as g2o text (VERTEX/EDGE lines of its group, priors, then FIX lines)."""
+    _refuse_unwritable(graph, "g2o")
     ids, edges, priors = graph.node_ids, graph.edges, graph.priors
     i, j = ids[edges.i], ids[edges.j]
     lines: list[str] = []
@@ -110,7 +111,6 @@ def format_g2o(
             "EDGE_SE3_PRIOR", [ids[priors.i], np.zeros(len(priors), int)], prior_numbers
         )
     else:
-        _refuse_unwritable(graph, "g2o")
         if sim3_dialect not in ("a", "b"):
             raise ValueError(f"Sim3 dialect is 'a' or 'b', not {sim3_dialect!r}")
         # g2o stores the world → camera element Sᵢ = Xᵢ⁻¹ and the edge Z = (our measurement)⁻¹,
