@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
 import sys
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -127,6 +129,15 @@ def _check_writable(
         raise UsageError(f"{source}: {reason}")
 
 
+@contextlib.contextmanager
+def _about(subject: str) -> Iterator[None]:
+    """Report a library ``ValueError`` as one line that starts with ``subject`` (the input)."""
+    try:
+        yield
+    except ValueError as error:
+        raise UsageError(f"{subject}: {error}") from None
+
+
 def optimize(args: argparse.Namespace) -> int:
     _refuse_to_overwrite(args.input, args.output, args.overwrite)
     _refuse_to_overwrite(args.input, args.covariances, args.overwrite)
@@ -144,10 +155,8 @@ def optimize(args: argparse.Namespace) -> int:
     _check_writable(args.input, graph, args.output)
     before = graph.copy()
     with Progress(enabled=_talks(args)) as progress:
-        try:
+        with _about(args.input):  # values the initialisation cannot hold, say
             result = posegraph.optimize(graph, callback=progress, **_solving(args))
-        except ValueError as error:  # values the initialisation cannot hold, say
-            raise UsageError(f"{args.input}: {error}") from None
     summary = result.summary
     _note_interruption(progress, summary)
     if not math.isfinite(summary.final_error):
@@ -280,10 +289,8 @@ def eval(args: argparse.Namespace) -> int:  # noqa: A001 - the subcommand's name
     inputs = _Inputs(args)
     estimate = inputs.trajectory(args.estimate)
     truth = inputs.trajectory(args.ground_truth)
-    try:
+    with _about(f"{args.estimate} against {args.ground_truth}"):  # they do not pair, say
         evaluation = evaluate(estimate, truth, args.align, args.delta, args.max_time_difference)
-    except ValueError as error:  # the two do not pair, or cannot be aligned as asked
-        raise UsageError(f"{args.estimate} against {args.ground_truth}: {error}") from None
     if args.plot:
         from posegraph.plotting import plot_trajectories
 
@@ -331,12 +338,10 @@ def scale_drift(args: argparse.Namespace) -> int:
     truth = inputs.trajectory(args.gt) if args.gt else None  # read before the work
     before = Trajectory.of_graph(graph)
     with Progress(enabled=_talks(args)) as progress:
-        try:
+        with _about(args.input):  # a graph it cannot correct (SE2), values beyond doubles
             correction = correct_scale_drift(
                 graph, args.scale_information, args.convention, callback=progress, **_solving(args)
             )
-        except ValueError as error:  # a graph it cannot correct (SE2), values beyond doubles
-            raise UsageError(f"{args.input}: {error}") from None
     summary = correction.result.summary
     _note_interruption(progress, summary)
     # Lifted by the reader (a file mixing SE3 and Sim3) or by the correction (SE3 only).
