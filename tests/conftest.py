@@ -83,6 +83,20 @@ def union(first: PoseGraph, second: PoseGraph, id_offset: int) -> PoseGraph:
     return graph
 
 
+SCALE_STEP = Sim3.exp(np.array([0, 0, 0, 0, 0, 0, 200.0]))
+"""A Sim3 measurement that multiplies the scale by e^200."""
+
+
+def sim3_scale_chain(with_values: bool = True) -> PoseGraph:
+    """Nodes 0–5 joined by edges i → i+1 of ``SCALE_STEP``: composed from node 0, node 4 lies
+    at scale e^800 and node 5 at e^1000, beyond double precision (which ends near e^709).
+    ``with_values``: every node at the identity; else none has a value."""
+    graph = PoseGraph(Sim3)
+    graph.add_nodes(np.arange(6), Sim3.identity((6,)) if with_values else None)
+    graph.add_edges(np.arange(5), np.arange(1, 6), SCALE_STEP, np.eye(7))
+    return graph
+
+
 def maps_joined_by_positions(group: type[LieGroup], joins: int) -> PoseGraph:
     """Two maps of 20 poses (ids 10–48 and 1010–1048), optimised, joined by ``joins``
     position-only edges (σ = 0.1 m) from nodes 16, 30, 40 of the first to 1018, 1034, 1012 of

@@ -20,11 +20,10 @@ from posegraph_datasets.outliers import add_false_loops
 from posegraph_datasets.paths import BENCHMARK_GRAPHS
 
 from posegraph.api import robust_mask
-from posegraph.graph import PoseGraph
 from posegraph.io import read_graph, write_graph
-from posegraph.lie import SE3, Sim3
+from posegraph.lie import SE3
 
-from .conftest import city_with_fixes, maps_joined_by_positions
+from .conftest import city_with_fixes, maps_joined_by_positions, sim3_scale_chain
 from .malformed import MALFORMED
 from .test_malformed import write_case
 
@@ -637,14 +636,11 @@ def test_numbers_that_overflow_are_reported_and_nothing_is_written(tmp_path):
 
 
 def test_an_initialisation_beyond_double_precision_is_reported_naming_the_file(tmp_path):
-    """Sim3 odometry that multiplies the scale by e^200 at every step: composed from the first
-    pose, the fifth lies beyond double precision. One line names the file and the node."""
-    chain = PoseGraph(Sim3)
-    chain.add_nodes(np.arange(6), Sim3.identity((6,)))
-    scale_step = Sim3.exp(np.array([0, 0, 0, 0, 0, 0, 200.0]))
-    chain.add_edges(np.arange(5), np.arange(1, 6), scale_step, np.eye(7))
+    """Sim3 odometry that multiplies the scale by e^200 at every step (``sim3_scale_chain``):
+    composed from the first pose, the fifth and sixth lie beyond double precision. One line
+    names the file and the nodes."""
     source, out = tmp_path / "scales.g2o", tmp_path / "out.g2o"
-    write_graph(chain, str(source))
+    write_graph(sim3_scale_chain(), str(source))
     failed = run("optimize", source, "-o", out, check_exit=2)
     assert failed.stderr == (
         f"posegraph: error: {source}: the odometry initialisation composes the measurements to"

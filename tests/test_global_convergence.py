@@ -42,7 +42,15 @@ from posegraph.solvers.options import DEFAULT_INITIAL_DAMPING
 from posegraph.sparse_cholesky import NotPositiveDefinite
 from posegraph.trajectory_io import Trajectory
 
-from .conftest import city_with_fixes, gnss_track, maps_joined_by_positions, random_graph, union
+from .conftest import (
+    SCALE_STEP,
+    city_with_fixes,
+    gnss_track,
+    maps_joined_by_positions,
+    random_graph,
+    sim3_scale_chain,
+    union,
+)
 
 
 def _ate(graph: PoseGraph, values, truth) -> float:
@@ -286,14 +294,11 @@ def test_covariances_of_a_map_that_can_turn_about_position_only_edges_can_be_ref
     [("odometry", "4, 5"), ("spanning-tree", "4, 5"), ("chordal", r"1, 2, 3, … \(5 nodes\)")],
 )
 def test_an_initialisation_beyond_double_precision_is_refused_naming_the_nodes(method, nodes):
-    """Sim3 edges that each multiply the scale by e^200 compose to e^800 at node 4 and e^1000
-    at node 5 (the loop 0 → 2 agrees with the chain): no double holds them. Chordal relaxation
-    solves for every translation at once, scaled by those scales, and loses all but node 0's."""
-    graph = PoseGraph(Sim3)
-    graph.add_nodes(np.arange(6))
-    scale_step = Sim3.exp(np.array([0, 0, 0, 0, 0, 0, 200.0]))
-    graph.add_edges(np.arange(5), np.arange(1, 6), scale_step, np.eye(7))
-    graph.add_edge(0, 2, scale_step @ scale_step, np.eye(7))
+    """``sim3_scale_chain`` composes to e^800 at node 4 and e^1000 at node 5 (the loop 0 → 2
+    agrees with the chain): no double holds them. Chordal relaxation solves for every
+    translation at once, scaled by those scales, and loses all but node 0's."""
+    graph = sim3_scale_chain(with_values=False)
+    graph.add_edge(0, 2, SCALE_STEP @ SCALE_STEP, np.eye(7))
     message = (
         rf"the {method} initialisation composes the measurements to values beyond double"
         rf" precision at nodes {nodes}: a translation or scale too large to hold"

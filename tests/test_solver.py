@@ -17,7 +17,7 @@ from posegraph.solvers.optimize import NOT_FINITE
 from posegraph.solvers.options import DEFAULT_INITIAL_DAMPING
 from posegraph.sparse_cholesky import available_backends
 
-from .conftest import POSE_GROUPS, gnss_track, random_graph, union
+from .conftest import POSE_GROUPS, gnss_track, random_graph, sim3_scale_chain, union
 
 
 def _gradient_norm(graph, values, held):
@@ -163,20 +163,11 @@ def test_non_finite_steps_are_rejected(monkeypatch):
     assert result.summary.converged
 
 
-def _sim3_chain_beyond_double_precision() -> posegraph.PoseGraph:
-    """Four edges that each multiply the scale by e^200, from values at the identity: the
-    optimum puts node 4 at scale e^800, which no double holds (they end near e^709)."""
-    graph = posegraph.PoseGraph(posegraph.Sim3)
-    graph.add_nodes([0, 1, 2, 3, 4], posegraph.Sim3.identity((5,)))
-    scale_step = posegraph.Sim3.exp(np.array([0, 0, 0, 0, 0, 0, 200.0]))
-    graph.add_edges([0, 1, 2, 3], [1, 2, 3, 4], scale_step, np.eye(7))
-    return graph
-
-
 def test_steps_that_overflow_are_rejected_silently():
-    """The Gauss-Newton step lands at e^800: GN stops, saying why; LM damps its steps and
-    ends on values that double precision holds. Neither lets numpy's warnings through."""
-    graph = _sim3_chain_beyond_double_precision()
+    """From the identity, the Gauss-Newton step lands at e^800 and e^1000 (``sim3_scale_chain``):
+    GN stops, saying why; LM damps its steps and ends on values that double precision holds.
+    Neither lets numpy's warnings through."""
+    graph = sim3_scale_chain()
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         gn = optimize(graph, SolverOptions(method="gn"))
