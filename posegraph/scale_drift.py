@@ -29,6 +29,7 @@ from .lifting import (
     default_scale_information,
     lift_information,
     lift_se3,
+    loop_scale_drift,
 )
 from .solvers import Callback, Result, SolverOptions
 from .trajectory_io import as_se3
@@ -67,13 +68,16 @@ def lift_graph(graph: PoseGraph, scale_information: float | None = None) -> Pose
     return lifted
 
 
-def lifting_scale_information(graph: PoseGraph, scale_information: float | None) -> float:
+def lifting_scale_information(
+    graph: PoseGraph, scale_information: float | None, loop_drift: float | None = None
+) -> float:
     """The σ-information ``lift_graph`` gives an SE3 graph: ``scale_information`` (checked
-    positive and finite), or if None ``default_scale_information`` of its edges."""
+    positive and finite), or if None ``default_scale_information`` of its edges and of the
+    scale drift per edge that Sim3 loops measured (``loop_drift``; None: no loops)."""
     check_scale_information(scale_information)
     if scale_information is not None:
         return scale_information
-    return default_scale_information(graph.edges.information, graph.edges.measurements)
+    return default_scale_information(graph.edges.information, graph.edges.measurements, loop_drift)
 
 
 def convert_convention(poses: SE3, convention: str) -> SE3:
@@ -169,7 +173,22 @@ def add_sim3_loops(
     scale_information: float | None = None,
 ) -> PoseGraph:
     """The graph lifted to Sim3 (if it is SE3) with loop closures i → j of measured Sim3
-    T_i_j (relative scale s_j / s_i of the two local maps) added."""
-    sim3 = lift_graph(graph, scale_information) if graph.group is SE3 else graph.copy()
-    sim3.add_edges(i_ids, j_ids, measurements, information)
+    T_i_j (relative scale s_j / s_i of the two local maps) added. The lift's log-scale
+    information is ``scale_information``, or if None ``lifting_scale_information`` with the
+    drift per edge that these loops measured (``loop_scale_drift``)."""
+    if graph.group is not SE3:
+        sim3 = graph.copy()
+        sim3.add_edges(i_ids, j_ids, measurements, information)
+        return sim3
+    lifted_with = lifting_scale_information(graph, scale_information)
+    sim3 = lift_graph(graph, lifted_with)
+    loops = sim3.add_edges(i_ids, j_ids, measurements, information)
+    if scale_information is None:
+        ends = np.stack([sim3.edges.i, sim3.edges.j], axis=1)
+        drift = loop_scale_drift(
+            ends[: graph.num_edges], ends[loops], sim3.edges.measurements.scale[loops]
+        )
+        relaxed = lifting_scale_information(graph, None, drift)
+        if relaxed != lifted_with:
+            return add_sim3_loops(graph, i_ids, j_ids, measurements, information, relaxed)
     return sim3

@@ -15,6 +15,7 @@ from ..lifting import (
     default_scale_information,
     lift_information,
     lift_se3,
+    loop_scale_drift,
 )
 from .errors import GraphFileError
 from .parsing import LineChecker, Rows, quaternion_problems, read_lines, to_rows
@@ -29,6 +30,7 @@ from .tags import (
 )
 
 ALL_TAGS: dict[str, TagFormat] = {**G2O_TAGS, **TORO_TAGS}
+_NO_ENDS = np.zeros((0, 2), np.int64)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -56,7 +58,8 @@ class ReadOptions:
     scale_information: float | None = None
     """For files mixing SE3 and Sim3 lines (monocular odometry plus Sim3 loop closures): the SE3
     lines are lifted to Sim3 with scale 1 and this information on log-scale (None:
-    ``posegraph.lifting.default_scale_information`` of the SE3 edges)."""
+    ``posegraph.lifting.default_scale_information`` of the SE3 edges and of the scale drift the
+    Sim3 edges measured, ``posegraph.lifting.loop_scale_drift``)."""
 
     def __post_init__(self) -> None:
         if self.edge2_order not in EDGE2_ORDERS:
@@ -123,12 +126,19 @@ def _lift_se3_records(collected: _Collected, scale_information: float | None) ->
     """Turn SE3 vertices, edges and priors into Sim3 ones of scale 1 (CONVENTIONS.md: both
     files' vertices are world-from-node, so no inversion is involved); returns the log-scale
     information of the lifted edges and priors, None if there were none."""
-    se3_edges = [(z, info) for _, z, info in collected.edges if isinstance(z, SE3)]
+    se3_edges = [(rows, z, info) for rows, z, info in collected.edges if isinstance(z, SE3)]
     lifted = bool(se3_edges) or any(isinstance(z, SE3) for _, z, _ in collected.priors)
     if scale_information is None:
+        loops = [(rows, z) for rows, z, _ in collected.edges if isinstance(z, Sim3)]
+        drift = loop_scale_drift(
+            np.concatenate([rows.node_ids[:, :2] for rows, _, _ in se3_edges] + [_NO_ENDS]),
+            np.concatenate([rows.node_ids[:, :2] for rows, _ in loops] + [_NO_ENDS]),
+            np.concatenate([z.scale for _, z in loops] + [np.zeros(0)]),
+        )
         scale_information = default_scale_information(
-            np.concatenate([info for _, info in se3_edges]) if se3_edges else np.zeros((0, 6, 6)),
-            SE3.concatenate([z for z, _ in se3_edges]) if se3_edges else SE3.identity((0,)),
+            np.concatenate([info for *_, info in se3_edges] + [np.zeros((0, 6, 6))]),
+            SE3.concatenate([z for _, z, _ in se3_edges] + [SE3.identity((0,))]),
+            drift,
         )
     collected.vertices = [
         (rows, lift_se3(values) if isinstance(values, SE3) else values)
