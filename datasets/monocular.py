@@ -31,6 +31,8 @@ from posegraph.lie.so3 import exp_matrix
 from posegraph.scale_drift import add_sim3_loops
 from posegraph.trajectory_io import Trajectory, write_trajectory
 
+from .outliers import add_false_loops
+
 
 @dataclasses.dataclass(frozen=True)
 class MonocularSequence:
@@ -54,6 +56,25 @@ class MonocularSequence:
             self.loop_information,
             scale_information,
         )
+
+    def sim3_graph_with_false_loops(
+        self, fraction: float, seed: int, scale_information: float | None = None
+    ) -> tuple[PoseGraph, np.ndarray]:
+        """``sim3_graph`` with false loops making up ``fraction`` of its loop closures
+        (``add_false_loops``), lifted as a file holding them all is read: the default lift hears
+        the false loops' scales too. Returns the graph and the mask of the false edges."""
+        corrupted, false = add_false_loops(self.sim3_graph(scale_information), fraction, seed)
+        loops = np.arange(self.odometry.num_edges, corrupted.num_edges)
+        ids, edges = corrupted.node_ids, corrupted.edges
+        graph = add_sim3_loops(
+            self.odometry,
+            ids[edges.i[loops]],
+            ids[edges.j[loops]],
+            edges.measurements[loops],
+            edges.information[loops],
+            scale_information,
+        )
+        return graph, false
 
     def ate(self, poses: SE3) -> float:
         """ATE RMSE of world-from-camera ``poses`` against the ground truth, SE3-aligned (no

@@ -10,7 +10,8 @@ Levenberg-Marquardt (``BetweenFactorSimilarity3``) from the lifted dead-reckonin
 side (``optimizer.time_gtsam``), and gives both final errors ½ Σ rᵀΩr.
 
 With ``--false-loops 0.3``, that share of the loop closures is false instead (random Sim3 loops,
-``posegraph_datasets.outliers.add_false_loops``, seeded by the sequence's seed): ATE of the
+``MonocularSequence.sim3_graph_with_false_loops``, seeded by the sequence's seed; the default
+lift hears them, as it would in a file): ATE of the
 correction without them, in least squares with them, and with ``robust="gnc"``, and the shares
 of false and true loops that GNC rejected.
 """
@@ -21,7 +22,7 @@ import argparse
 from collections.abc import Iterator
 
 from posegraph_datasets.monocular import MonocularSequence, monocular_sequence
-from posegraph_datasets.outliers import add_false_loops, rejection_rates
+from posegraph_datasets.outliers import rejection_rates
 
 from ..api import optimize
 from ..graph import PoseGraph
@@ -105,7 +106,7 @@ def run_false_loops(
     )
     for drift, seed, sequence in _sequences(drifts, seeds, poses):
         graph = sequence.sim3_graph(scale_information)
-        corrupted, false = add_false_loops(graph, fraction, seed)
+        corrupted, false = sequence.sim3_graph_with_false_loops(fraction, seed, scale_information)
         clean = correct_scale_drift(graph)
         plain = correct_scale_drift(corrupted)
         robust = correct_scale_drift(corrupted, robust="gnc")
