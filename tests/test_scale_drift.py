@@ -13,6 +13,7 @@ from posegraph.alignment import umeyama
 from posegraph.chordal import chordal_values
 from posegraph.graph import PoseGraph
 from posegraph.io import ReadOptions
+from posegraph.io.writer import format_g2o, sim3_edge_lines
 from posegraph.lie import SE3, Sim3
 from posegraph.lifting import default_scale_information, loop_scale_drift
 from posegraph.scale_drift import convert_convention, correct_scale_drift, lift_graph
@@ -183,6 +184,39 @@ def test_the_default_lift_allows_the_scale_change_the_loops_call_for(tmp_path):
         np.testing.assert_array_equal(given.edges.information[: odometry.i.size, 6, 6], 123.0)
     assert np.all(hops == 199)
     assert measured == pytest.approx(np.log1p(0.02) * 199**0.25, rel=0.05)
+
+
+def test_false_loops_are_heard_by_the_default_lift_as_in_a_file(tmp_path):
+    """``sim3_graph_with_false_loops`` holds the edges of ``add_false_loops`` (the same mask),
+    lifted as a g2o file of the odometry and all those loops is read; the false loops change
+    the default lift (not one given)."""
+    sequence = monocular_sequence(drift=0.02, seed=3)
+    graph, false = sequence.sim3_graph_with_false_loops(0.3, seed=4)
+    added, added_false = add_false_loops(sequence.sim3_graph(), 0.3, seed=4)
+    np.testing.assert_array_equal(false, added_false)
+    np.testing.assert_array_equal(graph.edges.i, added.edges.i)
+    np.testing.assert_array_equal(graph.edges.j, added.edges.j)
+    np.testing.assert_array_equal(
+        graph.edges.measurements.as_matrix(), added.edges.measurements.as_matrix()
+    )
+    odometry = sequence.odometry.num_edges
+    loops = np.arange(odometry, graph.num_edges)
+    ids, edges = graph.node_ids, graph.edges
+    lines = sim3_edge_lines(
+        ids[edges.i[loops]],
+        ids[edges.j[loops]],
+        edges.measurements[loops],
+        edges.information[loops],
+    )
+    path = tmp_path / "false_loops.g2o"
+    path.write_text(format_g2o(sequence.odometry) + "\n".join(lines) + "\n")
+    lifted = edges.information[:odometry, 6, 6]
+    assert posegraph.read_graph(str(path)).lifted_scale_information == pytest.approx(
+        lifted[0], rel=1e-12
+    )
+    assert np.all(lifted == lifted[0]) and lifted[0] != added.edges.information[0, 6, 6]
+    given, _ = sequence.sim3_graph_with_false_loops(0.3, seed=4, scale_information=50.0)
+    np.testing.assert_array_equal(given.edges.information[:odometry, 6, 6], 50.0)
 
 
 def test_a_file_whose_sim3_lines_are_all_skipped_reads_as_se3(tmp_path):
