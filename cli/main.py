@@ -95,7 +95,8 @@ def _parser() -> argparse.ArgumentParser:
         type=float,
         help="information on log-scale of SE3 edges lifted to Sim3, in files mixing SE3 and Sim3 "
         "lines (and, for scale-drift, in SE3 files): 1/σ², σ the relative scale drift per edge "
-        "(default: from their translation information, as the reports show)",
+        "(default: from their translation information, or the scale change the Sim3 loops "
+        "call for where that is larger; the reports show it)",
     )
     solving = argparse.ArgumentParser(add_help=False)
     solving.add_argument("--solver", choices=["lm", "gn"], default="lm", help="default: lm")
