@@ -29,7 +29,7 @@ from .lifting import (
     default_scale_information,
     lift_information,
     lift_se3,
-    loop_scale_drift,
+    loop_scale_sigma,
 )
 from .solvers import Callback, Result, SolverOptions
 from .trajectory_io import as_se3
@@ -69,15 +69,15 @@ def lift_graph(graph: PoseGraph, scale_information: float | None = None) -> Pose
 
 
 def lifting_scale_information(
-    graph: PoseGraph, scale_information: float | None, loop_drift: float | None = None
+    graph: PoseGraph, scale_information: float | None, loop_sigma: float | None = None
 ) -> float:
     """The σ-information ``lift_graph`` gives an SE3 graph: ``scale_information`` (checked
     positive and finite), or if None ``default_scale_information`` of its edges and of the
-    scale drift per edge that Sim3 loops measured (``loop_drift``; None: no loops)."""
+    scale change per edge that Sim3 loops call for (``loop_sigma``; None: no loops)."""
     check_scale_information(scale_information)
     if scale_information is not None:
         return scale_information
-    return default_scale_information(graph.edges.information, graph.edges.measurements, loop_drift)
+    return default_scale_information(graph.edges.information, graph.edges.measurements, loop_sigma)
 
 
 def convert_convention(poses: SE3, convention: str) -> SE3:
@@ -175,7 +175,7 @@ def add_sim3_loops(
     """The graph lifted to Sim3 (if it is SE3) with loop closures i → j of measured Sim3
     T_i_j (relative scale s_j / s_i of the two local maps) added. The lift's log-scale
     information is ``scale_information``, or if None ``lifting_scale_information`` with the
-    drift per edge that these loops measured (``loop_scale_drift``)."""
+    scale change per edge that these loops call for (``loop_scale_sigma``)."""
     if graph.group is not SE3:
         sim3 = graph.copy()
         sim3.add_edges(i_ids, j_ids, measurements, information)
@@ -185,10 +185,10 @@ def add_sim3_loops(
     loops = sim3.add_edges(i_ids, j_ids, measurements, information)
     if scale_information is None:
         ends = np.stack([sim3.edges.i, sim3.edges.j], axis=1)
-        drift = loop_scale_drift(
+        sigma = loop_scale_sigma(
             ends[: graph.num_edges], ends[loops], sim3.edges.measurements.scale[loops]
         )
-        relaxed = lifting_scale_information(graph, None, drift)
+        relaxed = lifting_scale_information(graph, None, sigma)
         if relaxed != lifted_with:
             return add_sim3_loops(graph, i_ids, j_ids, measurements, information, relaxed)
     return sim3

@@ -15,7 +15,7 @@ from posegraph.graph import PoseGraph
 from posegraph.io import ReadOptions
 from posegraph.io.writer import format_g2o, sim3_edge_lines
 from posegraph.lie import SE3, Sim3
-from posegraph.lifting import default_scale_information, loop_scale_drift
+from posegraph.lifting import default_scale_information, loop_scale_sigma
 from posegraph.scale_drift import convert_convention, correct_scale_drift, lift_graph
 
 
@@ -109,7 +109,7 @@ def _chain_with_shortcut(ids: np.ndarray) -> np.ndarray:
     return np.vstack([chain, [[ids[10], ids[40]]]])
 
 
-def test_loop_scale_drift_is_the_median_change_per_edge_on_the_shortest_path():
+def test_loop_scale_sigma_is_the_median_change_per_edge_on_the_shortest_path():
     """A loop whose ends k lifted edges join (counted here by hand on a chain of shuffled ids
     with one shortcut) calls for σ² = (log s)² / k^(3/2): loops built to call for one σ give
     it, alone or together. A loop with a false scale, one across to another component, and
@@ -124,17 +124,17 @@ def test_loop_scale_drift_is_the_median_change_per_edge_on_the_shortest_path():
     loops += [[ids[3], ids[60]], [ids[0], 5], [ids[7], ids[70]]]
     scales += [1e6, 3.0, -2.0]
     for k in range(5):
-        assert loop_scale_drift(edges, loops[k : k + 1], scales[k : k + 1]) == pytest.approx(
+        assert loop_scale_sigma(edges, loops[k : k + 1], scales[k : k + 1]) == pytest.approx(
             sigma, rel=1e-12
         )
-    assert loop_scale_drift(edges, loops, scales) == pytest.approx(sigma, rel=1e-12)
-    assert loop_scale_drift(edges, loops[5:], scales[5:]) == pytest.approx(np.log(1e6) / 28**0.75)
-    assert loop_scale_drift(edges, loops[6:], scales[6:]) is None  # nothing joined, no scale
-    assert loop_scale_drift(edges, loops[:5], np.ones(5)) is None  # the loops saw no change
-    assert loop_scale_drift(edges[:0], loops, scales) is None
+    assert loop_scale_sigma(edges, loops, scales) == pytest.approx(sigma, rel=1e-12)
+    assert loop_scale_sigma(edges, loops[5:], scales[5:]) == pytest.approx(np.log(1e6) / 28**0.75)
+    assert loop_scale_sigma(edges, loops[6:], scales[6:]) is None  # nothing joined, no scale
+    assert loop_scale_sigma(edges, loops[:5], np.ones(5)) is None  # the loops saw no change
+    assert loop_scale_sigma(edges[:0], loops, scales) is None
 
 
-def test_loop_scale_drift_searches_in_chunks_and_samples_the_loops(monkeypatch):
+def test_loop_scale_sigma_searches_in_chunks_and_samples_the_loops(monkeypatch):
     """One path search at a time gives the same σ; more loops than ``LOOPS_SEARCHED`` are
     sampled evenly: of 200 loops calling for σ = 1…200 (×1e-4) in random order, the median of
     the 64 sampled, which lies between the 40th and 60th percentile of all 200."""
@@ -145,12 +145,12 @@ def test_loop_scale_drift_searches_in_chunks_and_samples_the_loops(monkeypatch):
     loops = np.stack([starts, starts + 60], axis=1)
     sigma = 1e-4 * rng.permutation(np.arange(1, 201))
     scales = np.exp(60**0.75 * sigma)
-    whole = loop_scale_drift(edges, loops, scales)
+    whole = loop_scale_sigma(edges, loops, scales)
     sampled = sigma[np.linspace(0, 199, lifting.LOOPS_SEARCHED).astype(int)]
     assert whole == pytest.approx(np.sqrt(np.median(sampled**2)), rel=1e-12)
     assert np.quantile(sigma, 0.4) <= whole <= np.quantile(sigma, 0.6)
     monkeypatch.setattr(lifting, "PATH_ENTRIES", 1)
-    assert loop_scale_drift(edges, loops, scales) == pytest.approx(whole, rel=1e-12)
+    assert loop_scale_sigma(edges, loops, scales) == pytest.approx(whole, rel=1e-12)
 
 
 def test_the_default_lift_allows_the_scale_change_the_loops_call_for(tmp_path):

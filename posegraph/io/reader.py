@@ -15,7 +15,7 @@ from ..lifting import (
     default_scale_information,
     lift_information,
     lift_se3,
-    loop_scale_drift,
+    loop_scale_sigma,
 )
 from .errors import GraphFileError
 from .parsing import LineChecker, Rows, quaternion_problems, read_lines, to_rows
@@ -58,8 +58,8 @@ class ReadOptions:
     scale_information: float | None = None
     """For files mixing SE3 and Sim3 lines (monocular odometry plus Sim3 loop closures): the SE3
     lines are lifted to Sim3 with scale 1 and this information on log-scale (None:
-    ``posegraph.lifting.default_scale_information`` of the SE3 edges and of the scale drift the
-    Sim3 edges measured, ``posegraph.lifting.loop_scale_drift``)."""
+    ``posegraph.lifting.default_scale_information`` of the SE3 edges and of the scale change per
+    edge that the Sim3 edges call for, ``posegraph.lifting.loop_scale_sigma``)."""
 
     def __post_init__(self) -> None:
         if self.edge2_order not in EDGE2_ORDERS:
@@ -130,7 +130,7 @@ def _lift_se3_records(collected: _Collected, scale_information: float | None) ->
     lifted = bool(se3_edges) or any(isinstance(z, SE3) for _, z, _ in collected.priors)
     if scale_information is None:
         loops = [(rows, z) for rows, z, _ in collected.edges if isinstance(z, Sim3)]
-        drift = loop_scale_drift(
+        sigma = loop_scale_sigma(
             np.concatenate([rows.node_ids[:, :2] for rows, _, _ in se3_edges] + [_NO_ENDS]),
             np.concatenate([rows.node_ids[:, :2] for rows, _ in loops] + [_NO_ENDS]),
             np.concatenate([z.scale for _, z in loops] + [np.zeros(0)]),
@@ -138,7 +138,7 @@ def _lift_se3_records(collected: _Collected, scale_information: float | None) ->
         scale_information = default_scale_information(
             np.concatenate([info for *_, info in se3_edges] + [np.zeros((0, 6, 6))]),
             SE3.concatenate([z for _, z, _ in se3_edges] + [SE3.identity((0,))]),
-            drift,
+            sigma,
         )
     collected.vertices = [
         (rows, lift_se3(values) if isinstance(values, SE3) else values)
