@@ -84,9 +84,8 @@ def loop_scale_sigma(
     loop_ends = np.asarray(loop_ends, np.int64).reshape(-1, 2)
     with np.errstate(divide="ignore", invalid="ignore"):
         log_scale = np.log(np.asarray(loop_scales, float))
-    usable = np.isfinite(log_scale) & np.isin(loop_ends, edge_ends).all(axis=1)
-    usable = np.flatnonzero(usable)
-    if usable.size == 0 or edge_ends.size == 0:
+    usable = np.flatnonzero(np.isfinite(log_scale) & np.isin(loop_ends, edge_ends).all(axis=1))
+    if usable.size == 0:  # no lifted edges leave no loop usable too
         return None
     usable = usable[np.linspace(0, usable.size - 1, min(usable.size, LOOPS_SEARCHED)).astype(int)]
     nodes = np.unique(edge_ends)
