@@ -14,14 +14,19 @@ H = AᵀA is the information matrix of the linearised problem (priors included).
   predicts for it (the χ² gate of Kalman filtering). Adding the edge raises the cost by that
   much (Sherman–Morrison–Woodbury). A true loop that a distorted solution fits badly has a
   large residual but a large Pₑ, hence a small innovation.
+* Several edges not in the graph, added together: their joint innovation, the same form over
+  their stacked rows, with the cross terms Aₑ H⁻¹ A_fᵀ. Edges that each alone disagree with
+  the solution can agree with each other, and then raise the cost by far less than the sum of
+  their innovations.
 
-Both are estimated for all edges at once from K Rademacher probes z over the whitened rows and
-the one K-column solve w = H⁻¹ Aᵀ z. Mₑₑ from E[(A w)ₑ zₑᵀ] = Mₑₑ (Bekas, Kokiopoulou & Saad
-2007, "An estimator for the diagonal of a matrix"), whose variance per entry is (Mₑₑ − Mₑₑ²)/K;
+The first two are estimated for all edges at once from K Rademacher probes z over the whitened
+rows and the one K-column solve w = H⁻¹ Aᵀ z. Mₑₑ from E[(A w)ₑ zₑᵀ] = Mₑₑ (Bekas, Kokiopoulou &
+Saad 2007, "An estimator for the diagonal of a matrix"), whose variance per entry is (Mₑₑ − Mₑₑ²)/K;
 Pₑ from E[(Aₑ w)(Aₑ w)ᵀ] = Aₑ H⁻¹ (AᵀA) H⁻¹ Aₑᵀ = Pₑ, within ≈ √(2/K) relative. For a few
 chosen edges, Mₑₑ is exact, from the joint covariance of each edge's two nodes
 (``posegraph.marginals``): where Mₑₑ is near I, the estimate's error in I − Mₑₑ, squared in
-the deleted residual's s, can reach an order of magnitude.
+the deleted residual's s, can reach an order of magnitude. Joint innovations are exact, for a
+few chosen edges, from one solve with H's factor.
 """
 
 from __future__ import annotations
@@ -30,6 +35,7 @@ import dataclasses
 import functools
 
 import numpy as np
+import scipy.linalg
 
 from .factors import Linearization, information_root, linearize_between, linearize_priors
 from .graph import EdgeSet, PoseGraph
@@ -59,6 +65,21 @@ class _Factored:
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """H⁻¹ rhs for a (size, K) right-hand side, as (num_nodes, d, K), zero on held nodes."""
         return self.system.scatter(self.system.solve(rhs))
+
+    def transposed_rows(
+        self, i: np.ndarray, j: np.ndarray, rows_i: np.ndarray, rows_j: np.ndarray
+    ) -> np.ndarray:
+        """Aᵀ of m edges' rows (m, d, d) at their nodes i and j, as (size, m·d): column
+        e·d + b is row b of edge e."""
+        system, d = self.system, self.system.dof
+        out = np.zeros((system.size, len(i) * d))
+        columns = np.arange(len(i) * d).reshape(-1, d, 1)
+        for nodes, rows in ((i, rows_i), (j, rows_j)):
+            block = system.block_of[nodes]
+            free = block >= 0  # held nodes have no columns in H
+            places = (block[free, None] * d + np.arange(d))[:, None, :]
+            np.add.at(out, (places, columns[free]), rows[free])
+        return out
 
     def rademacher(self, probes: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
         """Rademacher probes z of the between rows (K, m, d) and w = H⁻¹ Aᵀ z, the priors'
@@ -154,10 +175,14 @@ class Leverage:
         self.probes, self.seed, self.linear_solver = probes, seed, linear_solver
 
     @functools.cached_property
+    def _factored(self) -> _Factored:
+        """H factorised at the values, shared by the probes and the exact joint innovations."""
+        return _factorize(self.graph, self.values, self.linear_solver)
+
+    @functools.cached_property
     def _probed(self) -> tuple[_Factored, np.ndarray, np.ndarray]:
         """H factorised, the probes z (K, m, d) and w = H⁻¹ Aᵀ z (num_nodes, d, K)."""
-        factored = _factorize(self.graph, self.values, self.linear_solver)
-        return factored, *factored.rademacher(self.probes, self.seed)
+        return self._factored, *self._factored.rademacher(self.probes, self.seed)
 
     def deleted_residuals(self) -> DeletedResiduals:
         """Estimated deleted residuals of every between edge of the graph."""
@@ -178,6 +203,24 @@ class Leverage:
         predicted = samples @ np.swapaxes(samples, 1, 2) / self.probes
         eigenvalues, projected = _eigen(whitened, np.eye(self.graph.group.dof) + predicted)
         return (projected**2 / eigenvalues).sum(axis=1)
+
+    def sequential_innovations(self, candidates: EdgeSet) -> np.ndarray:
+        """Exact innovation χ² of each edge of ``candidates`` against the solution with the
+        edges before it added (to first order): their running sums are the joint innovations
+        of the leading edges, r̃ᵀ (I + A H⁻¹ Aᵀ)⁻¹ r̃ over their stacked rows A and whitened
+        residuals r̃ (the joint compatibility test of Neira & Tardós 2001, "Data Association
+        in Stochastic Mapping Using the Joint Compatibility Test"). With C = I + A H⁻¹ Aᵀ =
+        L Lᵀ, the k-th is ‖(L⁻¹ r̃)ₖ‖², one solve with H's factor of d columns per edge."""
+        factored = self._factored
+        whitened, rows_i, rows_j = _whitened(
+            linearize_between(self.values, candidates), candidates.information
+        )
+        rows = factored.transposed_rows(candidates.i, candidates.j, rows_i, rows_j)
+        predicted = rows.T @ factored.system.solve(rows)
+        covariance = np.eye(len(predicted)) + 0.5 * (predicted + predicted.T)
+        factor = np.linalg.cholesky(covariance)
+        standardized = scipy.linalg.solve_triangular(factor, whitened.reshape(-1), lower=True)
+        return (standardized.reshape(whitened.shape) ** 2).sum(axis=1)
 
 
 def _deleted(whitened: np.ndarray, hat: np.ndarray) -> DeletedResiduals:
