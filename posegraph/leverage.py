@@ -210,7 +210,8 @@ class Leverage:
         of the leading edges, r̃ᵀ (I + A H⁻¹ Aᵀ)⁻¹ r̃ over their stacked rows A and whitened
         residuals r̃ (the joint compatibility test of Neira & Tardós 2001, "Data Association
         in Stochastic Mapping Using the Joint Compatibility Test"). With C = I + A H⁻¹ Aᵀ =
-        L Lᵀ, the k-th is ‖(L⁻¹ r̃)ₖ‖², one solve with H's factor of d columns per edge."""
+        L Lᵀ, the k-th is ‖(L⁻¹ r̃)ₖ‖², one solve with H's factor of d columns per edge. All
+        are ∞ where C or r̃ is not finite, or C not numerically positive definite."""
         factored = self._factored
         whitened, rows_i, rows_j = _whitened(
             linearize_between(self.values, candidates), candidates.information
@@ -218,8 +219,11 @@ class Leverage:
         rows = factored.transposed_rows(candidates.i, candidates.j, rows_i, rows_j)
         predicted = rows.T @ factored.system.solve(rows)
         covariance = np.eye(len(predicted)) + 0.5 * (predicted + predicted.T)
-        factor = np.linalg.cholesky(covariance)
-        standardized = scipy.linalg.solve_triangular(factor, whitened.reshape(-1), lower=True)
+        try:
+            factor = np.linalg.cholesky(covariance)
+            standardized = scipy.linalg.solve_triangular(factor, whitened.reshape(-1), lower=True)
+        except (np.linalg.LinAlgError, ValueError):  # not positive definite, or not finite
+            return np.full(len(whitened), np.inf)
         return (standardized.reshape(whitened.shape) ** 2).sum(axis=1)
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from posegraph_datasets.generators import manhattan_world, sphere
@@ -113,3 +115,19 @@ def test_sequential_innovations_sum_to_the_cost_that_adding_the_edges_together_a
         added.set_values(solution.values)
         costs.append(optimize(added, options).summary.final_chi2 - solution.summary.final_chi2)
     assert joint == pytest.approx(costs, rel=0.02, abs=0.05)
+
+
+def test_candidates_beyond_double_precision_have_infinite_innovations(backend):
+    """A candidate whose measurement overflowed: its joint innovations are ∞ (as its single
+    innovation is), so a search that weighs it adds nothing rather than failing."""
+    graph = GRAPHS["SE3"]()
+    solution = optimize(graph, SolverOptions(linear_solver=backend))
+    candidates = graph.edges.subset(_loops(graph)[:2])
+    measured = candidates.measurements
+    candidates = dataclasses.replace(
+        candidates,
+        measurements=SE3(measured.rotation, np.full_like(measured.translation, np.inf)),
+    )
+    leverage = Leverage(graph, solution.values, linear_solver=backend)
+    assert np.isposinf(leverage.sequential_innovations(candidates)).all()
+    assert np.isposinf(leverage.innovations(candidates)).all()
