@@ -18,10 +18,9 @@ consistency pass and a local search.
    - re-admit: the rejected loops whose innovation χ² against the solution is below c²
      (``posegraph.leverage.innovations``), or that together have a joint innovation below
      their Σ c², and that the other re-admitted loops explain, are added back together, and
-     the kept set is settled as in step 3, both warm-started and
-     from the chordal relaxation of the kept set (the lower objective is kept). A region
-     that drifted while its true loops were rejected fits them badly (large s) but predicts the
-     misfit (small innovation), and they pull the region back for each other;
+     the kept set is settled as in step 3, from both starts. A region that drifted while its
+     true loops were rejected fits them badly (large s) but predicts the misfit (small
+     innovation), and they pull the region back for each other;
    - drop: for the kept loops with the largest deleted residuals d² (``posegraph.leverage``:
      what leaving the loop out would save, to first order), re-solve without each one
      (warm-started). A false loop that the solution bent itself to fit has a small residual s
