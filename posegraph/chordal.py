@@ -65,13 +65,23 @@ def _anchors(graph: PoseGraph) -> tuple[np.ndarray, LieGroup]:
     return held, values
 
 
-def _solve(pattern: BlockPattern, blocks: np.ndarray, pieces: np.ndarray) -> np.ndarray:
-    """Minimise Σₑ ‖Jₑ x + r⁰ₑ‖²_W over the free blocks: H x = −g, one right-hand side per
-    trailing column of ``pieces`` (2m, d, k), all with one factorisation. Returns (n, d, k)
-    with zeros at held nodes."""
+def _solve(
+    pattern: BlockPattern, diagonal: np.ndarray, off_diagonal: np.ndarray, pieces: np.ndarray
+) -> np.ndarray:
+    """Minimise Σₑ ‖Jₑ x + r⁰ₑ‖²_W over the free blocks: H x = −g, where edge e adds
+    ``diagonal`` (m, d, d) to H_ii and H_jj, ``off_diagonal`` (m, d, d) to H_ij (its transpose
+    to H_ji), and g's i and j parts ``pieces`` (m, 2, d, k), one right-hand side per trailing
+    column, all solved with one factorisation. Returns (n, d, k) with zeros at held nodes."""
+    blocks = np.stack(
+        [
+            np.concatenate([diagonal, off_diagonal], axis=2),
+            np.concatenate([np.swapaxes(off_diagonal, 1, 2), diagonal], axis=2),
+        ],
+        axis=1,
+    )
     pattern.factorize_regularized(pattern.matrix_data(blocks))
-    columns = pieces.shape[2]
-    rhs = np.stack([pattern.vector(pieces[:, :, c]) for c in range(columns)], axis=1)
+    columns = pieces.shape[3]
+    rhs = np.stack([pattern.vector(pieces[..., c]) for c in range(columns)], axis=1)
     return pattern.scatter(pattern.solve(-rhs))
 
 
@@ -109,9 +119,8 @@ def chordal_values(graph: PoseGraph) -> LieGroup:
     rows = np.zeros((n, d, d))
     rows[held] = held_rotation
     r0 = rows[j] - rows[i] @ z  # (m, a, ·): row a of every edge's residual at the known rows
-    blocks = np.concatenate([w * eye, w * eye, -w * z, -w * np.swapaxes(z, 1, 2)])
-    pieces = np.concatenate([-w * (z @ np.swapaxes(r0, 1, 2)), w * np.swapaxes(r0, 1, 2)])
-    rows += np.swapaxes(_solve(pattern, blocks, pieces), 1, 2)
+    pieces = np.stack([-w * (z @ np.swapaxes(r0, 1, 2)), w * np.swapaxes(r0, 1, 2)], axis=1)
+    rows += np.swapaxes(_solve(pattern, w * eye, -w * z, pieces), 1, 2)
     rotation = kept(project_to_rotation(rows), start_rotation, weight)
     rotation[held] = held_rotation
 
@@ -121,9 +130,9 @@ def chordal_values(graph: PoseGraph) -> LieGroup:
         log_scale[held] = np.log(held_scale)
         w_s = scale_weight[:, None, None]
         r0 = (log_scale[j] - log_scale[i] - np.log(measured_scale))[:, None, None]
-        blocks = np.concatenate([w_s, w_s, -w_s, -w_s])
-        pieces = np.concatenate([-w_s * r0, w_s * r0])
-        log_scale += _solve(BlockPattern(block_of, i, j, no_priors, 1), blocks, pieces)[:, 0, 0]
+        pieces = np.stack([-w_s * r0, w_s * r0], axis=1)
+        scales = BlockPattern(block_of, i, j, no_priors, 1)
+        log_scale += _solve(scales, w_s, -w_s, pieces)[:, 0, 0]
         log_scale = kept(log_scale, np.log(start_scale), scale_weight)
     scale = np.exp(log_scale)
 
@@ -136,8 +145,8 @@ def chordal_values(graph: PoseGraph) -> LieGroup:
     offsets = scale[i, None] * np.einsum("mab,mb->ma", rotation[i], measured_translation)
     r0 = translation[j] - translation[i] - offsets
     weighted = np.einsum("mab,mb->ma", world, r0)[:, :, None]
-    blocks = np.concatenate([world, world, -world, -world])
-    translation += _solve(pattern, blocks, np.concatenate([-weighted, weighted]))[:, :, 0]
+    pieces = np.stack([-weighted, weighted], axis=1)
+    translation += _solve(pattern, world, -world, pieces)[:, :, 0]
     translation_weight = np.trace(translation_information, axis1=1, axis2=2)
     translation = kept(translation, start_translation, translation_weight)
     if group is SE2:

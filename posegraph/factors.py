@@ -22,18 +22,27 @@ from .lie import LieGroup
 
 @dataclasses.dataclass(frozen=True)
 class Linearization:
-    """Residuals (m, d) and Jacobians (m, d, d) of every edge; ``jac_i`` is None for priors."""
+    """Residuals (m, d) and Jacobians of every edge: (m, d, 2d) [∂r/∂δᵢ ∂r/∂δⱼ] of between
+    edges, (m, d, d) ∂r/∂δ of priors."""
 
     residuals: np.ndarray
-    jac_i: np.ndarray | None
-    jac_j: np.ndarray
+    jacobians: np.ndarray
+
+    @property
+    def jac_i(self) -> np.ndarray:
+        """∂r/∂δᵢ (m, d, d) of between edges."""
+        return self.jacobians[..., : self.residuals.shape[-1]]
+
+    @property
+    def jac_j(self) -> np.ndarray:
+        """∂r/∂δⱼ (m, d, d) of between edges, ∂r/∂δ of priors."""
+        return self.jacobians[..., -self.residuals.shape[-1] :]
 
     def extended(self, other: Linearization) -> Linearization:
         """This linearisation followed by ``other``'s edges."""
         return Linearization(
             np.concatenate([self.residuals, other.residuals]),
-            None if self.jac_i is None else np.concatenate([self.jac_i, other.jac_i]),
-            np.concatenate([self.jac_j, other.jac_j]),
+            np.concatenate([self.jacobians, other.jacobians]),
         )
 
 
@@ -52,11 +61,15 @@ def between_residuals(values: LieGroup, edges: EdgeSet) -> np.ndarray:
     return residuals_of(relative_poses(values, edges), edges)
 
 
-def between_jacobians(relative: LieGroup, residuals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """∂r/∂δᵢ = −jr⁻¹(r) Ad(Xⱼ⁻¹ Xᵢ) and ∂r/∂δⱼ = jr⁻¹(r) of every between edge, from its
-    relative pose Xᵢ⁻¹ Xⱼ and residual."""
+def between_jacobians(relative: LieGroup, residuals: np.ndarray) -> np.ndarray:
+    """[∂r/∂δᵢ ∂r/∂δⱼ] (m, d, 2d) of every between edge, ∂r/∂δᵢ = −jr⁻¹(r) Ad(Xⱼ⁻¹ Xᵢ) and
+    ∂r/∂δⱼ = jr⁻¹(r), from its relative pose Xᵢ⁻¹ Xⱼ and residual."""
     jac_j = relative.jr_inv(residuals)
-    return -jac_j @ relative.inverse().adjoint(), jac_j
+    d = jac_j.shape[-1]
+    jacobians = np.empty(jac_j.shape[:-1] + (2 * d,))
+    np.matmul(-jac_j, relative.inverse().adjoint(), out=jacobians[..., :d])
+    jacobians[..., d:] = jac_j
+    return jacobians
 
 
 def prior_residuals(values: LieGroup, priors: EdgeSet) -> np.ndarray:
@@ -68,16 +81,16 @@ def linearize_between(values: LieGroup, edges: EdgeSet) -> Linearization:
     """Residuals and both Jacobians of every between edge."""
     relative = relative_poses(values, edges)
     residuals = residuals_of(relative, edges)
-    return Linearization(residuals, *between_jacobians(relative, residuals))
+    return Linearization(residuals, between_jacobians(relative, residuals))
 
 
 def linearize_priors(values: LieGroup, priors: EdgeSet) -> Linearization:
     """Residuals and Jacobians of every prior."""
     if len(priors) == 0:
         d = values.dof
-        return Linearization(np.zeros((0, d)), None, np.zeros((0, d, d)))
+        return Linearization(np.zeros((0, d)), np.zeros((0, d, d)))
     residuals = prior_residuals(values, priors)
-    return Linearization(residuals, None, values.jr_inv(residuals))
+    return Linearization(residuals, values.jr_inv(residuals))
 
 
 def information_root(information: np.ndarray, inverse: bool = False) -> np.ndarray:

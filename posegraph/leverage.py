@@ -92,14 +92,14 @@ class _Factored:
         def transposed_times(rows: np.ndarray, probe: np.ndarray) -> np.ndarray:
             return np.einsum("mba,mb->ma", rows, probe)
 
+        rows = np.concatenate([self.rows_i, self.rows_j], axis=2)  # an edge's piece: i, then j
         rhs = np.stack(
             [
                 self.system.vector(
                     np.concatenate(
                         [
-                            transposed_times(self.rows_i, z[k]),
-                            transposed_times(self.rows_j, z[k]),
-                            transposed_times(self.prior_rows, z_priors[k]),
+                            transposed_times(rows, z[k]).ravel(),
+                            transposed_times(self.prior_rows, z_priors[k]).ravel(),
                         ]
                     )
                 )

@@ -73,20 +73,26 @@ class BlockPattern:
         self._prior_blocks = prior_blocks
         block_positions = self._layout(block_keys)
 
-        # Stacked block order: H_ii, H_jj, H_ij, H_ji of every edge, then every prior's. Blocks
-        # touching a held node (index −1) select the last row: the trash slot after ``data``.
+        # Stacked block order: every edge's 2d × 2d block [[H_ii, H_ij], [H_ji, H_jj]], then
+        # every prior's d × d. Blocks touching a held node (index −1) select the last row: the
+        # trash slot after ``data``.
         with_trash = np.concatenate([block_positions, np.full((1, d * d), self.nnz)])
-        stacked = np.concatenate([edge_blocks.ravel(), prior_blocks])
-        self._block_positions = with_trash[stacked].ravel()
+        quadrants = with_trash[edge_blocks[[0, 2, 3, 1]]].reshape(2, 2, -1, d, d)
+        self._block_positions = np.concatenate(
+            [quadrants.transpose(2, 0, 3, 1, 4).ravel(), with_trash[prior_blocks].ravel()]
+        )
 
         within = np.arange(d)
 
         def vector_positions(blocks: np.ndarray) -> np.ndarray:
-            return np.where(blocks[:, None] >= 0, blocks[:, None] * d + within, self.size).ravel()
+            return np.where(blocks[:, None] >= 0, blocks[:, None] * d + within, self.size)
 
-        # Stacked vector order: the i part of every edge, the j part, then every prior's.
+        # Stacked vector order: every edge's i and j parts, then every prior's.
         self._vector_positions = np.concatenate(
-            [vector_positions(a), vector_positions(b), vector_positions(p)]
+            [
+                np.concatenate([vector_positions(a), vector_positions(b)], axis=1).ravel(),
+                vector_positions(p).ravel(),
+            ]
         )
         self.cholesky = make_cholesky(
             self.indices,
@@ -192,11 +198,13 @@ class BlockPattern:
         return int(self.indptr[-1])
 
     def matrix_data(self, blocks: np.ndarray) -> np.ndarray:
-        """CSC ``data`` summed from (4m + p, d, d) blocks stacked as H_ii, H_jj, H_ij, H_ji, priors."""
+        """CSC ``data`` summed from stacked blocks: every edge's 2d × 2d [[H_ii, H_ij],
+        [H_ji, H_jj]], then every prior's d × d (any shape with these entries in this order)."""
         return np.bincount(self._block_positions, blocks.reshape(-1), self.nnz + 1)[:-1]
 
     def vector(self, pieces: np.ndarray) -> np.ndarray:
-        """A length-``size`` vector summed from (2m + p, d) pieces stacked as i parts, j parts, priors."""
+        """A length-``size`` vector summed from stacked pieces: every edge's 2d (its i part,
+        then its j part), then every prior's d."""
         return np.bincount(self._vector_positions, pieces.reshape(-1), self.size + 1)[:-1]
 
     def factorize(self, data: np.ndarray, damping: np.ndarray | None = None) -> None:
@@ -321,23 +329,26 @@ class NormalEquations(BlockPattern):
         priors: Linearization,
         prior_information: np.ndarray,
     ) -> tuple[np.ndarray, np.ndarray]:
-        """The CSC ``data`` of H and the gradient g, from the edges' Jacobians (products are
-        written straight into the stacked buffers ``matrix_data`` and ``vector`` sum)."""
+        """The CSC ``data`` of H and the gradient g, from the Jacobians J of every edge (J =
+        [Jᵢ Jⱼ] of a between edge): Jᵀ Ω J and Jᵀ Ω r, written straight into the stacked
+        buffers that ``matrix_data`` and ``vector`` sum."""
         m, p, d = between.residuals.shape[0], priors.residuals.shape[0], self.dof
-        jit_omega = np.swapaxes(between.jac_i, 1, 2) @ between_information
-        jjt_omega = np.swapaxes(between.jac_j, 1, 2) @ between_information
-        jpt_omega = np.swapaxes(priors.jac_j, 1, 2) @ prior_information
-        blocks = np.empty((4 * m + p, d, d))
-        np.matmul(jit_omega, between.jac_i, out=blocks[:m])
-        np.matmul(jjt_omega, between.jac_j, out=blocks[m : 2 * m])
-        np.matmul(jit_omega, between.jac_j, out=blocks[2 * m : 3 * m])
-        blocks[3 * m : 4 * m] = np.swapaxes(blocks[2 * m : 3 * m], 1, 2)
-        np.matmul(jpt_omega, priors.jac_j, out=blocks[4 * m :])
-        pieces = np.empty((2 * m + p, d))
-        np.matmul(jit_omega, between.residuals[:, :, None], out=pieces[:m, :, None])
-        np.matmul(jjt_omega, between.residuals[:, :, None], out=pieces[m : 2 * m, :, None])
-        np.matmul(jpt_omega, priors.residuals[:, :, None], out=pieces[2 * m :, :, None])
+        edge_entries, edge_pieces = 4 * m * d * d, 2 * m * d
+        blocks, pieces = np.empty(edge_entries + p * d * d), np.empty(edge_pieces + p * d)
+        _normal_terms(between, between_information, blocks[:edge_entries], pieces[:edge_pieces])
+        _normal_terms(priors, prior_information, blocks[edge_entries:], pieces[edge_pieces:])
         return self.matrix_data(blocks), self.vector(pieces)
+
+
+def _normal_terms(
+    linearization: Linearization, information: np.ndarray, blocks: np.ndarray, pieces: np.ndarray
+) -> None:
+    """Write Jᵀ Ω J and Jᵀ Ω r of every edge into the flat buffers ``blocks`` and ``pieces``."""
+    jacobians = linearization.jacobians
+    count, width = jacobians.shape[0], jacobians.shape[2]
+    jt_omega = np.swapaxes(jacobians, 1, 2) @ information
+    np.matmul(jt_omega, jacobians, out=blocks.reshape(count, width, width))
+    np.matmul(jt_omega, linearization.residuals[:, :, None], out=pieces.reshape(count, width, 1))
 
 
 def factorized_information(

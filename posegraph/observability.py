@@ -112,9 +112,9 @@ def first_order_information(
     """The CSC data of H₁ = Σ J₀ᵀ Πₑ J₀ (module docstring) at ``values``, in ``system``."""
     d, edges, priors = graph.group.dof, graph.edges, graph.priors
     met = np.zeros((len(edges), d))
-    between = Linearization(met, *between_jacobians(relative_poses(values, edges), met))
+    between = Linearization(met, between_jacobians(relative_poses(values, edges), met))
     unit = np.broadcast_to(np.eye(d), (len(priors), d, d))
-    at_priors = Linearization(np.zeros((len(priors), d)), None, unit)
+    at_priors = Linearization(np.zeros((len(priors), d)), unit)
     data, _ = system.assemble(
         between,
         _measured_projector(edges.information),

@@ -247,7 +247,7 @@ def test_an_undetermined_direction_moves_a_part_of_the_map_without_changing_any_
     root = information_root(graph.edges.information)  # what each edge measures: Ω^½ r
     edges = graph.edges
     met = np.zeros((len(edges), group.dof))
-    jac_i, jac_j = between_jacobians(relative_poses(graph.values, edges), met)
+    jac_i, jac_j = np.split(between_jacobians(relative_poses(graph.values, edges), met), 2, axis=2)
 
     def first_order(tangent):
         change = jac_i @ tangent[edges.i, :, None] + jac_j @ tangent[edges.j, :, None]

@@ -116,7 +116,7 @@ class _Linearized:
     def between(self) -> Linearization:
         """Residuals and Jacobians of every between edge."""
         jacobians = between_jacobians(self._relative, self._residuals)
-        appended = Linearization(self._residuals, *jacobians)
+        appended = Linearization(self._residuals, jacobians)
         return appended if self._reused is None else self._reused.extended(appended)
 
     def _holds_for(self, edges, values: LieGroup) -> bool:
