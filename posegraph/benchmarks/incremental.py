@@ -1,13 +1,18 @@
 """Streaming a graph into a back end: warm starts against optimising every prefix from scratch.
 
 Usage: ``python -m posegraph.benchmarks.incremental [--step 100] [--graph w10000.graph]
-[--robust gnc --false-loops 0.1 --seed 0]``.
+[--robust gnc --false-loops 0.1 --seed 0] [--gtsam]``.
 The graph (by default gtsam's Data/w10000.graph) arrives ``step`` poses at a time: the new
 poses come without values, with every edge whose two ends have arrived, and
 ``posegraph.optimize`` runs after each step (warm start). The reference optimises each prefix as
 a new graph (its default initialisation). Times count the ``optimize`` calls only. With
 ``--robust``, every call is robust, and ``--false-loops`` first adds that share of seeded false
 loop closures (``posegraph_datasets.outliers``); the last calls' rejection rates are reported.
+
+With ``--gtsam``, the same stream also goes into gtsam, with default parameters
+(``gtsam_stream``): Levenberg-Marquardt over the whole graph from its last estimate after every
+step, as posegraph's warm start does, and iSAM2, updated once per step. Their times count
+gtsam's calls only.
 """
 
 from __future__ import annotations
@@ -22,7 +27,9 @@ from posegraph_datasets.paths import gtsam_data_dir
 
 from ..api import RESTART, optimize
 from ..graph import PoseGraph
+from ..initialization import spanning_tree_values
 from ..io import read_graph
+from ..lie import LieGroup
 from ..solvers import Summary
 from .timing import at_least
 
@@ -61,8 +68,73 @@ def stream(full: PoseGraph, step: int):
         yield graph
 
 
+_GTSAM_LABELS = {
+    "lm": "Levenberg-Marquardt from its last estimate",
+    "isam2": "iSAM2, one update per step",
+}
+
+
+def gtsam_stream(full: PoseGraph, step: int) -> dict[str, tuple[float, float]]:
+    """``full`` streamed (``stream``) into gtsam's Levenberg-Marquardt, re-optimising the whole
+    graph from its last estimate after every step, and into iSAM2, updated once per step (both
+    with gtsam's default parameters). New nodes start from each one's own estimate, composed
+    along a spanning tree (``spanning_tree_values``) as posegraph's warm start composes them;
+    the first node is held at its value. Returns per method (seconds in gtsam's calls, final
+    error ½ Σ rᵀΩr)."""
+    import gtsam
+
+    from ..validation import gtsam_bridge as bridge
+
+    factors, isam = gtsam.NonlinearFactorGraph(), gtsam.ISAM2(gtsam.ISAM2Params())
+    estimates = {"lm": gtsam.Values(), "isam2": gtsam.Values()}
+    seconds = {"lm": 0.0, "isam2": 0.0}
+    count, edges = 0, 0
+    for graph in stream(full, step):
+        new_nodes = np.arange(count, graph.num_nodes)
+        new = bridge.between_factors(graph, np.arange(edges, graph.num_edges))
+        if count == 0:
+            new.push_back(bridge.held_priors(graph, np.arange(1), graph.values))
+        starts = {
+            method: bridge.values_to_gtsam(
+                graph,
+                new_nodes,
+                _composed(graph, bridge.values_from_gtsam(graph, values, count) if count else None),
+            )
+            for method, values in estimates.items()
+        }
+        factors.push_back(new)
+        start = time.perf_counter()
+        estimates["lm"].insert(starts["lm"])
+        optimizer = gtsam.LevenbergMarquardtOptimizer(
+            factors, estimates["lm"], gtsam.LevenbergMarquardtParams()
+        )
+        estimates["lm"] = optimizer.optimize()
+        seconds["lm"] += time.perf_counter() - start
+        start = time.perf_counter()
+        isam.update(new, starts["isam2"])
+        estimates["isam2"] = isam.calculateEstimate()
+        seconds["isam2"] += time.perf_counter() - start
+        count, edges = graph.num_nodes, graph.num_edges
+    return {method: (seconds[method], factors.error(estimates[method])) for method in seconds}
+
+
+def _composed(graph: PoseGraph, known: LieGroup | None) -> LieGroup:
+    """Values of every node: ``known`` for the first nodes (None: the first node's own value),
+    the others composed from them along a spanning tree."""
+    count = 1 if known is None else len(known)
+    scratch = graph.copy()
+    if known is not None:
+        scratch.set_values(graph.values.set_at(np.arange(count), known))
+    return spanning_tree_values(scratch, np.arange(graph.num_nodes) < count)
+
+
 def run(
-    path: Path, step: int, robust: str | None = None, false_loops: float = 0.0, seed: int = 0
+    path: Path,
+    step: int,
+    robust: str | None = None,
+    false_loops: float = 0.0,
+    seed: int = 0,
+    with_gtsam: bool = False,
 ) -> str:
     full = read_graph(str(path)).graph
     false = np.zeros(full.num_edges, dtype=bool)
@@ -96,6 +168,14 @@ def run(
         f" (relative difference {difference:+.1e})",
         f"  last call reused: {', '.join(last_warm.reused) or 'nothing'}",
     ]
+    if with_gtsam:
+        optimum = last_scratch.final_error
+        for method, (seconds, error) in gtsam_stream(full, step).items():
+            lines.append(
+                f"  gtsam {_GTSAM_LABELS[method]}: total {seconds:.2f} s (posegraph's warm starts"
+                f" take {warm_total / seconds:.2f}×), final error {error:.10g}"
+                f" ({(error - optimum) / optimum:+.1e} relative to the scratch solution's)"
+            )
     if robust is not None:
         streamed_false = false[np.argsort(arrivals(full, step)[1], kind="stable")]
         lines.append(
@@ -120,6 +200,9 @@ def main() -> None:
         "--false-loops", type=float, default=0.0, help="share of false loop closures to add"
     )
     parser.add_argument("--seed", type=int, default=0, help="of the false loops")
+    parser.add_argument(
+        "--gtsam", action="store_true", help="stream into gtsam LM and iSAM2 too, side by side"
+    )
     args = parser.parse_args()
     if args.graph:
         path = Path(args.graph)
@@ -127,7 +210,7 @@ def main() -> None:
         path = gtsam_data_dir() / "w10000.graph"
     else:
         raise SystemExit("no graph given and gtsam's Data/ is not installed")
-    print(run(path, args.step, args.robust, args.false_loops, args.seed))
+    print(run(path, args.step, args.robust, args.false_loops, args.seed, args.gtsam))
 
 
 if __name__ == "__main__":

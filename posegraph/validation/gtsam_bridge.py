@@ -129,22 +129,8 @@ def graph_to_gtsam(graph, values=None, hold_gauge: bool = True, huber=None):
     """
     group = graph.group
     values = graph.values if values is None else values
-    factors = gtsam.NonlinearFactorGraph()
-    initial = gtsam.Values()
     ids = graph.node_ids.tolist()
-    for k, node in enumerate(ids):
-        initial.insert(node, to_gtsam(values[k]))
-    edges = graph.edges
-    between = _BETWEEN_FACTOR[group]
-    for e in range(len(edges)):
-        factors.add(
-            between(
-                ids[edges.i[e]],
-                ids[edges.j[e]],
-                to_gtsam(edges.measurements[e]),
-                _edge_noise_model(group, edges.information[e], huber, e),
-            )
-        )
+    factors = between_factors(graph, np.arange(graph.num_edges), huber)
     prior = _PRIOR_FACTOR[group]
     for e in range(len(graph.priors)):
         factors.add(
@@ -155,18 +141,55 @@ def graph_to_gtsam(graph, values=None, hold_gauge: bool = True, huber=None):
             )
         )
     if hold_gauge:
-        sigma = gtsam.noiseModel.Isotropic.Sigma(group.dof, GAUGE_SIGMA)
-        for k in graph.gauge_nodes().tolist():
-            factors.add(prior(ids[k], to_gtsam(values[k]), sigma))
-    return factors, initial
+        factors.push_back(held_priors(graph, graph.gauge_nodes(), values))
+    return factors, values_to_gtsam(graph, np.arange(graph.num_nodes), values)
 
 
-def values_from_gtsam(graph, gtsam_values) -> LieGroup:
-    """The node values of a gtsam Values, in the graph's node order."""
+def between_factors(graph, edges: np.ndarray, huber=None):
+    """gtsam's between factors of some of a PoseGraph's edges (indices ``edges``); ``huber`` as
+    ``graph_to_gtsam``'s."""
+    group, ids, all_edges = graph.group, graph.node_ids.tolist(), graph.edges
+    between = _BETWEEN_FACTOR[group]
+    factors = gtsam.NonlinearFactorGraph()
+    for e in np.asarray(edges).tolist():
+        factors.add(
+            between(
+                ids[all_edges.i[e]],
+                ids[all_edges.j[e]],
+                to_gtsam(all_edges.measurements[e]),
+                _edge_noise_model(group, all_edges.information[e], huber, e),
+            )
+        )
+    return factors
+
+
+def held_priors(graph, nodes: np.ndarray, values: LieGroup):
+    """Priors of σ = ``GAUGE_SIGMA`` that hold the nodes (indices ``nodes``) at ``values``
+    (every node's)."""
+    group, ids = graph.group, graph.node_ids.tolist()
+    sigma = gtsam.noiseModel.Isotropic.Sigma(group.dof, GAUGE_SIGMA)
+    factors = gtsam.NonlinearFactorGraph()
+    for k in np.asarray(nodes).tolist():
+        factors.add(_PRIOR_FACTOR[group](ids[k], to_gtsam(values[k]), sigma))
+    return factors
+
+
+def values_to_gtsam(graph, nodes: np.ndarray, values: LieGroup):
+    """gtsam Values of some nodes (indices ``nodes``) of a PoseGraph, from ``values`` (every
+    node's), keyed by node id."""
+    ids = graph.node_ids.tolist()
+    out = gtsam.Values()
+    for k in np.asarray(nodes).tolist():
+        out.insert(ids[k], to_gtsam(values[k]))
+    return out
+
+
+def values_from_gtsam(graph, gtsam_values, count: int | None = None) -> LieGroup:
+    """The node values of a gtsam Values, in the graph's node order (its first ``count``
+    nodes, if given)."""
     getter = _VALUE_GETTER[graph.group]
-    return graph.group.stack(
-        [from_gtsam(getattr(gtsam_values, getter)(node)) for node in graph.node_ids.tolist()]
-    )
+    ids = graph.node_ids[:count].tolist()
+    return graph.group.stack([from_gtsam(getattr(gtsam_values, getter)(node)) for node in ids])
 
 
 def gradient_from_gtsam(graph, factors, gtsam_values) -> np.ndarray:
