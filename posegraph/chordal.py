@@ -131,8 +131,8 @@ def chordal_values(graph: PoseGraph) -> LieGroup:
         w_s = scale_weight[:, None, None]
         r0 = (log_scale[j] - log_scale[i] - np.log(measured_scale))[:, None, None]
         pieces = np.stack([-w_s * r0, w_s * r0], axis=1)
-        scales = BlockPattern(block_of, i, j, no_priors, 1)
-        log_scale += _solve(scales, w_s, -w_s, pieces)[:, 0, 0]
+        scale_pattern = BlockPattern(block_of, i, j, no_priors, 1)
+        log_scale += _solve(scale_pattern, w_s, -w_s, pieces)[:, 0, 0]
         log_scale = kept(log_scale, np.log(start_scale), scale_weight)
     scale = np.exp(log_scale)
 

@@ -75,7 +75,7 @@ class BlockPattern:
 
         # Stacked block order: every edge's 2d × 2d block [[H_ii, H_ij], [H_ji, H_jj]], then
         # every prior's d × d. Blocks touching a held node (index −1) select the last row: the
-        # trash slot after ``data``.
+        # trash slot after ``data``. ``edge_blocks`` rows are (ii, jj, ij, ji).
         with_trash = np.concatenate([block_positions, np.full((1, d * d), self.nnz)])
         quadrants = with_trash[edge_blocks[[0, 2, 3, 1]]].reshape(2, 2, -1, d, d)
         self._block_positions = np.concatenate(
