@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import gc
 import os
 import stat
 
@@ -497,3 +498,22 @@ def test_w10000_with_equiv_lines(gtsam_dataset):
     assert result.format == "toro"
     assert result.tag_counts == {"VERTEX2": 10000, "EDGE2": 64311, "EQUIV": 5875}
     assert result.graph.equivalences.shape == (5875, 2)
+
+
+@pytest.mark.parametrize("enabled", [True, False])
+def test_reading_leaves_the_garbage_collector_as_it_found_it(tmp_path, enabled):
+    """The reader pauses Python's cyclic garbage collector while it parses (``posegraph.io.
+    parsing.paused_garbage_collection``), and restores its state after a file that reads and
+    after one that is refused."""
+    good, bad = tmp_path / "good.g2o", tmp_path / "bad.g2o"
+    good.write_text("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nEDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\n")
+    bad.write_text("VERTEX_SE2 0 0 0 0\nEDGE_SE2 0 1 1 0 zero 1 0 0 1 0 1\n")
+    (gc.enable if enabled else gc.disable)()
+    try:
+        assert read_graph(str(good)).graph.num_edges == 1
+        assert gc.isenabled() == enabled
+        with pytest.raises(GraphFileError, match=":2: .*'zero' is not a number"):
+            read_graph(str(bad))
+        assert gc.isenabled() == enabled
+    finally:
+        gc.enable()

@@ -8,7 +8,10 @@ skipped and recorded instead.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import gc
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -56,6 +59,21 @@ class LineChecker:
         return rows.subset(~bad) if bad_rows.size else rows
 
 
+@contextlib.contextmanager
+def paused_garbage_collection() -> Iterator[None]:
+    """Pause Python's cyclic garbage collector (as a context or a decorator). Reading a file
+    makes a list of tokens per line, none in a reference cycle, and the collections that their
+    allocation set off took 200 of 440 ms reading w10000.graph (74,000 lines)."""
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if enabled:
+            gc.enable()
+
+
+@paused_garbage_collection()
 def read_lines(path: str) -> list[tuple[int, list[str]]]:
     """(line number, tokens) of every line that is not blank or a comment: ``#`` starts a
     comment, at the start of a line or after its numbers. UTF-8, with or without a byte-order
@@ -70,14 +88,8 @@ def read_lines(path: str) -> list[tuple[int, list[str]]]:
         raise GraphFileError(path, None, "is not a text file") from None
     except OSError as error:
         raise GraphFileError(path, None, f"cannot be read ({error.strerror})") from None
-    lines = []
-    for number, line in enumerate(text.splitlines(), start=1):
-        if "#" in line:
-            line = line[: line.index("#")]
-        tokens = line.split()
-        if tokens:
-            lines.append((number, tokens))
-    return lines
+    split = [line.partition("#")[0].split() for line in text.splitlines()]
+    return [(number, tokens) for number, tokens in enumerate(split, start=1) if tokens]
 
 
 def to_rows(
@@ -95,37 +107,35 @@ def to_rows(
     (``TagFormat.widths_without_information``) is told that it lacks its information. Returns
     None when no line survives.
     """
-    good: list[tuple[int, list[str]]] = []
-    for number, tokens in entries:
-        count = len(tokens) - 1
-        if (widths and count not in widths) or (not widths and count < 1):
-            expected = " or ".join(str(w) for w in widths) if widths else "at least 1"
-            advice = (
-                ": the line has no information matrix (--identity-information weighs every edge"
-                " by the identity, as TORO's -ic does)"
-                if count in without_information
-                else ""
-            )
-            checker.fail(
-                number, f"{tag}: expected {expected} numbers after the tag, found {count}{advice}"
-            )
-        else:
-            good.append((number, tokens))
-    rows_by_width: dict[int, list[tuple[int, list[str]]]] = {}
-    for entry in good:
-        rows_by_width.setdefault(len(entry[1]) - 1, []).append(entry)
-    if len(rows_by_width) > 1 and widths:
-        found = sorted(rows_by_width)
-        first = min(rows_by_width[found[-1]])[0]
-        checker.fail(first, f"{tag}: lines of {found} numbers mixed in one file (two dialects)")
-        good = rows_by_width[found[0]]
+    counts = np.fromiter((len(tokens) - 1 for _, tokens in entries), np.int64, len(entries))
+    accepted = np.isin(counts, widths) if widths else counts >= 1
+    for k in np.flatnonzero(~accepted):
+        expected = " or ".join(str(w) for w in widths) if widths else "at least 1"
+        advice = (
+            ": the line has no information matrix (--identity-information weighs every edge"
+            " by the identity, as TORO's -ic does)"
+            if counts[k] in without_information
+            else ""
+        )
+        checker.fail(
+            entries[k][0],
+            f"{tag}: expected {expected} numbers after the tag, found {counts[k]}{advice}",
+        )
+    found = np.unique(counts[accepted])
+    if found.size > 1 and widths:
+        first = entries[np.flatnonzero(accepted & (counts == found[-1]))[0]][0]
+        checker.fail(
+            first, f"{tag}: lines of {found.tolist()} numbers mixed in one file (two dialects)"
+        )
+        accepted &= counts == found[0]
+    good = entries if accepted.all() else [entries[k] for k in np.flatnonzero(accepted)]
     if not good:
         return None
     if not widths:  # variable-length id lists (FIX)
         flat = [(number, token) for number, tokens in good for token in tokens[1:]]
         entries_1d = [(number, [tag, token]) for number, token in flat]
         return to_rows(tag, entries_1d, (1,), (0,), checker)
-    line_numbers = np.array([number for number, _ in good])
+    line_numbers = np.fromiter((number for number, _ in good), np.int64, len(good))
     parsed = np.ones(len(good), dtype=bool)
     try:
         numbers = np.array([tokens[1:] for _, tokens in good], dtype=float)

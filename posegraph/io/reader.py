@@ -18,7 +18,14 @@ from ..lifting import (
     loop_scale_sigma,
 )
 from .errors import GraphFileError
-from .parsing import LineChecker, Rows, quaternion_problems, read_lines, to_rows
+from .parsing import (
+    LineChecker,
+    Rows,
+    paused_garbage_collection,
+    quaternion_problems,
+    read_lines,
+    to_rows,
+)
 from .tags import (
     EDGE2_ORDERS,
     G2O_TAGS,
@@ -334,6 +341,7 @@ def _apply_prior_offsets(collected: _Collected, checker: LineChecker) -> None:
     ]
 
 
+@paused_garbage_collection()
 def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
     """Read a g2o or TORO file (told apart by their tags).
 
