@@ -13,7 +13,7 @@ import numpy as np
 
 from .io.atomic import atomic_write_text
 from .io.errors import GraphFileError
-from .io.parsing import quaternion_problems, read_lines
+from .io.parsing import paused_garbage_collection, quaternion_problems, read_lines
 from .io.writer import number_fields, refuse_non_finite
 from .lie import SE2, SE3, LieGroup, Sim3
 
@@ -59,12 +59,14 @@ def _text(rows: np.ndarray) -> str:
     return "".join(" ".join(fields) + "\n" for fields in number_fields(rows))
 
 
+@paused_garbage_collection()
 def format_tum(trajectory: Trajectory) -> str:
     q, t = trajectory.poses.as_quaternion_translation()
     rows = np.concatenate([trajectory.keys[:, None].astype(float), t, q], axis=1)
     return _text(rows)
 
 
+@paused_garbage_collection()
 def format_kitti(trajectory: Trajectory) -> str:
     rows = trajectory.poses.as_matrix()[:, :3, :].reshape(-1, 12)
     return _text(rows)

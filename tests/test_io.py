@@ -501,10 +501,10 @@ def test_w10000_with_equiv_lines(gtsam_dataset):
 
 
 @pytest.mark.parametrize("enabled", [True, False])
-def test_reading_leaves_the_garbage_collector_as_it_found_it(tmp_path, enabled):
-    """The reader pauses Python's cyclic garbage collector while it parses (``posegraph.io.
-    parsing.paused_garbage_collection``), and restores its state after a file that reads and
-    after one that is refused."""
+def test_reading_and_writing_leave_the_garbage_collector_as_they_found_it(tmp_path, enabled):
+    """The reader and the writer pause Python's cyclic garbage collector while they parse or
+    format (``posegraph.io.parsing.paused_garbage_collection``), and restore its state after a
+    file that reads, after one that is refused, and after writing."""
     good, bad = tmp_path / "good.g2o", tmp_path / "bad.g2o"
     good.write_text("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nEDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\n")
     bad.write_text("VERTEX_SE2 0 0 0 0\nEDGE_SE2 0 1 1 0 zero 1 0 0 1 0 1\n")
@@ -514,6 +514,8 @@ def test_reading_leaves_the_garbage_collector_as_it_found_it(tmp_path, enabled):
         assert gc.isenabled() == enabled
         with pytest.raises(GraphFileError, match=":2: .*'zero' is not a number"):
             read_graph(str(bad))
+        assert gc.isenabled() == enabled
+        write_graph(read_graph(str(good)).graph, str(tmp_path / "written.g2o"))
         assert gc.isenabled() == enabled
     finally:
         gc.enable()

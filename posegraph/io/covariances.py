@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from .atomic import atomic_write_text
-from .parsing import upper_from_symmetric
+from .parsing import paused_garbage_collection, upper_from_symmetric
 from .writer import number_fields
 
 TANGENT_NAMES = {
@@ -19,6 +19,7 @@ TANGENT_NAMES = {
 """Tangent coordinates by group: translation ρ, rotation φ (rad), σ = log scale."""
 
 
+@paused_garbage_collection()
 def format_covariances(group: str, node_ids: np.ndarray, covariances: np.ndarray) -> str:
     """The text of (k, d, d) covariances of nodes ``node_ids`` of a ``group`` ("SE2", …)."""
     names = TANGENT_NAMES[group]

@@ -61,9 +61,10 @@ class LineChecker:
 
 @contextlib.contextmanager
 def paused_garbage_collection() -> Iterator[None]:
-    """Pause Python's cyclic garbage collector (as a context or a decorator). Reading a file
-    makes a list of tokens per line, none in a reference cycle, and the collections that their
-    allocation set off took 200 of 440 ms reading w10000.graph (74,000 lines)."""
+    """Pause Python's cyclic garbage collector (as a context or a decorator) while a file is
+    read or its text formatted. Both make a list of tokens per line, none in a reference cycle,
+    and the collections that their allocation set off took 200 of 440 ms reading w10000.graph
+    (74,000 lines), and 57 of 246 ms formatting it."""
     enabled = gc.isenabled()
     gc.disable()
     try:

@@ -9,7 +9,7 @@ import numpy as np
 from ..graph import PoseGraph
 from ..lie import SE2, SE3, LieGroup, Sim3
 from .atomic import atomic_write_text
-from .parsing import upper_from_symmetric
+from .parsing import paused_garbage_collection, upper_from_symmetric
 from .tags import (
     matrix_to_rpy,
     se3_information_to_file,
@@ -80,6 +80,7 @@ def sim3_edge_lines(
     return _lines("EDGE_SIM3:EXPMAP", [i_ids, j_ids], numbers)
 
 
+@paused_garbage_collection()
 def format_g2o(
     graph: PoseGraph, g2o_rotation_information: bool = False, sim3_dialect: str = "a"
 ) -> str:
@@ -155,6 +156,7 @@ def _refuse_unwritable(graph: PoseGraph, file_format: str) -> None:
         raise ValueError(reason)
 
 
+@paused_garbage_collection()
 def format_toro(graph: PoseGraph) -> str:
     """The graph as TORO text (VERTEX2/EDGE2 or VERTEX3/EDGE3, then EQUIV lines)."""
     _refuse_unwritable(graph, "toro")
