@@ -6,6 +6,7 @@ graph's export writes node ids there. KITTI lines have no key: the line index is
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 from typing import TYPE_CHECKING
 
@@ -79,19 +80,19 @@ def write_trajectory(trajectory: Trajectory, path: str, file_format: str) -> Non
     atomic_write_text(path, text)
 
 
-def read_trajectory(path: str, file_format: str) -> Trajectory:
-    """Read "tum" or "kitti"; errors name ``file:line``."""
-    lines = read_lines(path)
-    width = {"tum": 8, "kitti": 12}[file_format]
-    if not lines:
-        raise GraphFileError(path, None, f"holds no {file_format.upper()} poses")
+def _numbers(path: str, lines: list, width: int, name: str) -> np.ndarray:
+    """The (n, ``width``) numbers of a trajectory file's lines: converted at once, or where that
+    fails, line by line, naming the first bad line."""
+    if all(len(tokens) == width for _, tokens in lines):
+        with contextlib.suppress(ValueError):
+            numbers = np.array([tokens for _, tokens in lines], dtype=float)
+            if np.isfinite(numbers).all():
+                return numbers
     rows = []
     for number, tokens in lines:
         if len(tokens) != width:
             raise GraphFileError(
-                path,
-                number,
-                f"{file_format.upper()} lines have {width} numbers, found {len(tokens)}",
+                path, number, f"{name} lines have {width} numbers, found {len(tokens)}"
             )
         try:
             row = np.array(tokens, dtype=float)
@@ -100,7 +101,16 @@ def read_trajectory(path: str, file_format: str) -> Trajectory:
         if not np.all(np.isfinite(row)):
             raise GraphFileError(path, number, "NaN or infinite value")
         rows.append(row)
-    numbers = np.array(rows)
+    return np.array(rows)
+
+
+def read_trajectory(path: str, file_format: str) -> Trajectory:
+    """Read "tum" or "kitti"; errors name ``file:line``."""
+    lines = read_lines(path)
+    width = {"tum": 8, "kitti": 12}[file_format]
+    if not lines:
+        raise GraphFileError(path, None, f"holds no {file_format.upper()} poses")
+    numbers = _numbers(path, lines, width, file_format.upper())
     if file_format == "tum":
         problems = quaternion_problems(numbers[:, 4:8])
         if problems:
@@ -114,5 +124,5 @@ def read_trajectory(path: str, file_format: str) -> Trajectory:
     if np.abs(rotation @ np.swapaxes(rotation, 1, 2) - np.eye(3)).max() > 1e-3:
         raise GraphFileError(path, None, "a 3 × 3 block is not a rotation matrix")
     return Trajectory(
-        np.arange(len(rows), dtype=float), SE3(rotation, matrices[:, :, 3]).normalize()
+        np.arange(len(numbers), dtype=float), SE3(rotation, matrices[:, :, 3]).normalize()
     )

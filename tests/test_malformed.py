@@ -47,3 +47,34 @@ def test_tum_quaternion_that_is_no_rotation_is_rejected(tmp_path, quaternion, wo
     path.write_text(f"0.0 1 2 3 0 0 0 1\n0.1 1 2 3 {quaternion}\n")
     with pytest.raises(GraphFileError, match=rf"poses\.tum:2: {words}"):
         read_trajectory(str(path), "tum")
+
+
+GOOD_TUM = "0.0 1 2 3 0 0 0 1\n"
+GOOD_KITTI = "1 0 0 5 0 1 0 6 0 0 1 7\n"
+
+
+@pytest.mark.parametrize(
+    "file_format, bad, words",
+    [
+        ("tum", "0.2 1 2 3 0 0 1", "TUM lines have 8 numbers, found 7"),
+        ("tum", "0.2 1 2 three 0 0 0 1", "a value is not a number"),
+        ("tum", "0.2 1 nan 3 0 0 0 1", "NaN or infinite value"),
+        ("kitti", "1 0 0 5 0 1 0 6 0 0 1 inf", "NaN or infinite value"),
+        ("kitti", "1 0 0 5 0 1 0 6 0 0 1 7 8", "KITTI lines have 12 numbers, found 13"),
+    ],
+)
+def test_trajectory_line_that_is_bad_is_named(tmp_path, file_format, bad, words):
+    """Trajectory lines are converted at once; a bad one (here the third line, after a comment)
+    is still named, with what is wrong."""
+    good = GOOD_TUM if file_format == "tum" else GOOD_KITTI
+    path = tmp_path / f"poses.{file_format}"
+    path.write_text(good + "# a comment\n" + bad + "\n" + good)
+    with pytest.raises(GraphFileError, match=rf"poses\.{file_format}:3: {words}"):
+        read_trajectory(str(path), file_format)
+
+
+def test_trajectory_names_the_first_bad_line_whatever_is_wrong_with_the_others(tmp_path):
+    path = tmp_path / "poses.tum"
+    path.write_text(GOOD_TUM + "0.1 1 inf 3 0 0 0 1\n0.2 1 2 3 0 0 1\n0.3 x 2 3 0 0 0 1\n")
+    with pytest.raises(GraphFileError, match=r"poses\.tum:2: NaN or infinite value"):
+        read_trajectory(str(path), "tum")
