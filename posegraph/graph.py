@@ -240,6 +240,15 @@ class PoseGraph:
         key, result = self.last_result
         return result.system if key == (self.structure_version, linear_solver) else None
 
+    def current_normal_matrix(self, values, linear_solver: str) -> np.ndarray | None:
+        """H's CSC data at ``values``, in the pattern of ``current_system(linear_solver)``, if
+        the last least-squares ``posegraph.optimize`` assembled it there (at its solution,
+        when it stopped after a linearisation) and the graph's measurements are those it
+        solved; else None."""
+        if self.current_system(linear_solver) is None:
+            return None
+        return self.last_result[1].linearization.normal_matrix_for(self, values)
+
     @property
     def optimized(self) -> bool:
         """Whether ``values`` holds a solution of ``posegraph.optimize`` (it warm-starts)."""

@@ -18,7 +18,7 @@ import numpy as np
 
 from .graph import PoseGraph
 from .lie import LieGroup
-from .linear import NormalEquations, factorized_information
+from .linear import NormalEquations, factorize_information, factorized_information
 from .observability import SINGULAR, singular_information, undetermined_direction
 from .sparse_cholesky import NotPositiveDefinite, covariance_by_solves
 
@@ -64,7 +64,8 @@ def marginals(
     a false fix cannot shrink the covariances.
 
     After a least-squares ``posegraph.optimize``, while the graph's structure is unchanged, the
-    covariances of a few nodes refill its normal equations instead of building new ones.
+    covariances of a few nodes refill its normal equations instead of building new ones, and
+    at its solution they factorise the H it assembled there (``current_normal_matrix``).
 
     Returns (k, d, d) marginal blocks, or with ``joint=True`` the (k·d, k·d) joint covariance of
     the nodes together (for a pair, the 2d × 2d matrix with their cross-covariance). Raises
@@ -94,16 +95,23 @@ def marginals(
             raise singular_information(graph, direction=direction)
     groups = index[None, :] if joint else index[:, None]
     # Solves serve any factor, so the last least-squares solve's normal equations do (a back
-    # end reading its newest pose's covariance after each step); for selected inversion, new
-    # ones (supernodal, coupled) grow from their pattern.
+    # end reading its newest pose's covariance after each step), and H itself where that solve
+    # assembled it at these values; for selected inversion, new ones (supernodal, coupled) grow
+    # from their pattern.
     system, held = graph.current_system(linear_solver), graph.gauge_nodes()
     d = graph.group.dof
+    solved = None
     if not covariance_by_solves(index.size * d, groups.shape[1] * d):
         system = NormalEquations(graph, held, linear_solver, covariance_of=groups, previous=system)
     elif system is None:
         system = NormalEquations(graph, held, linear_solver)
+    else:
+        solved = graph.current_normal_matrix(values, linear_solver)
     try:
-        factorized_information(graph, values, system, least_share=SINGULAR)
+        if solved is None:
+            factorized_information(graph, values, system, least_share=SINGULAR)
+        else:
+            factorize_information(system, solved, least_share=SINGULAR)
     except NotPositiveDefinite:
         raise singular_information(graph, values) from None
     covariances = joint_covariances(system, groups)

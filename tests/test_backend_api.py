@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import importlib
 import pickle
 
 import numpy as np
@@ -620,6 +621,42 @@ def test_the_newest_poses_covariance_fills_the_last_solves_normal_equations(monk
     covariance = posegraph.marginals(graph, newest)
     assert built == [1]
     np.testing.assert_allclose(covariance, posegraph.marginals(graph.copy(), newest), rtol=1e-10)
+
+
+def test_the_covariance_at_the_solution_factorises_the_h_the_solve_assembled(monkeypatch):
+    """At the solution of a least-squares solve, the covariance factorises the H that the
+    solve assembled there, without linearising again; at other values, and after a robust
+    solve (whose H holds IRLS weights), it linearises. The covariance is the same either way
+    (a copy, which has no cached solve, computes it afresh)."""
+    graph, _ = manhattan_world(num_poses=120, seed=88)
+    posegraph.optimize(graph)
+    nodes = graph.node_ids[[-1, 40]]
+    linearised = []
+    # The package's attribute posegraph.marginals is the function, so the module by its name.
+    marginals_module = importlib.import_module("posegraph.marginals")
+    fresh = marginals_module.factorized_information
+
+    def counted(*args, **kwargs):
+        linearised.append(1)
+        return fresh(*args, **kwargs)
+
+    monkeypatch.setattr(marginals_module, "factorized_information", counted)
+    covariance = posegraph.marginals(graph, nodes)
+    assert linearised == []
+    np.testing.assert_allclose(covariance, posegraph.marginals(graph.copy(), nodes), rtol=1e-10)
+    moved = graph.values.retract(np.full((graph.num_nodes, 3), 0.01))
+    linearised.clear()
+    np.testing.assert_allclose(
+        posegraph.marginals(graph, nodes, values=moved),
+        posegraph.marginals(graph.copy(), nodes, values=moved),
+        rtol=1e-10,
+    )
+    assert linearised == [1, 1]
+    posegraph.optimize(graph, robust="huber")
+    linearised.clear()
+    covariance = posegraph.marginals(graph, nodes)
+    assert linearised == [1]
+    np.testing.assert_allclose(covariance, posegraph.marginals(graph.copy(), nodes), rtol=1e-10)
 
 
 @pytest.mark.skipif("cholmod" not in sparse_cholesky.available_backends(), reason="no cvxopt")

@@ -81,6 +81,9 @@ class _Linearized:
 
     ``previous``, a linearisation of this graph before edges were appended, is reused for its
     edges if their nodes still have the values it was taken at (a warm start).
+
+    ``normal_matrix`` is H's CSC data at these values once the solver has assembled it (None
+    before), which covariances at the solution reuse (``normal_matrix_for``).
     """
 
     def __init__(
@@ -90,7 +93,9 @@ class _Linearized:
         weighting: EdgeWeighting | None,
         previous: _Linearized | None = None,
     ) -> None:
-        self.values, self.edges = values, graph.edges
+        self.values, self.edges, self.prior_edges = values, graph.edges, graph.priors
+        self.weighted = weighting is not None
+        self.normal_matrix: np.ndarray | None = None
         reused = previous is not None and previous._holds_for(graph.edges, values)
         self.reused_edges = len(previous.edges) if reused else 0
         # Without reuse, every edge is "appended" (and the edge set is not copied).
@@ -118,6 +123,22 @@ class _Linearized:
         jacobians = between_jacobians(self._relative, self._residuals)
         appended = Linearization(self._residuals, jacobians)
         return appended if self._reused is None else self._reused.extended(appended)
+
+    def normal_matrix_for(self, graph: PoseGraph, values: LieGroup) -> np.ndarray | None:
+        """``normal_matrix``, if it is H of ``graph`` at ``values``: assembled at exactly these
+        values, over exactly the graph's edges and priors, in least squares (no IRLS weights);
+        else None."""
+        if self.normal_matrix is None or self.weighted:
+            return None
+        same = (
+            len(values) == len(self.values)
+            and values.same_as(self.values)
+            and len(graph.edges) == len(self.edges)
+            and graph.edges.starts_with(self.edges)
+            and len(graph.priors) == len(self.prior_edges)
+            and graph.priors.starts_with(self.prior_edges)
+        )
+        return self.normal_matrix if same else None
 
     def _holds_for(self, edges, values: LieGroup) -> bool:
         """Whether this linearisation is that of the first edges of ``edges`` at ``values``."""
@@ -198,13 +219,14 @@ def optimize(
 
 
 def _assemble(graph, system, current, clock):
-    """H's CSC data, the gradient and diag(H) at ``current`` (its Jacobians timed as
-    linearisation)."""
+    """H's CSC data (kept as ``current.normal_matrix``), the gradient and diag(H) at
+    ``current`` (its Jacobians timed as linearisation)."""
     between = current.between
     clock.lap("linearize")
     data, gradient = system.assemble(
         between, current.information, current.priors, graph.priors.information
     )
+    current.normal_matrix = data
     clock.lap("assemble")
     return data, gradient, system.diagonal(data)
 
