@@ -100,18 +100,18 @@ def marginals(
     # from their pattern.
     system, held = graph.current_system(linear_solver), graph.gauge_nodes()
     d = graph.group.dof
-    solved = None
+    assembled = None
     if not covariance_by_solves(index.size * d, groups.shape[1] * d):
         system = NormalEquations(graph, held, linear_solver, covariance_of=groups, previous=system)
     elif system is None:
         system = NormalEquations(graph, held, linear_solver)
     else:
-        solved = graph.current_normal_matrix(values, linear_solver)
+        assembled = graph.current_normal_matrix(values, linear_solver)
     try:
-        if solved is None:
+        if assembled is None:
             factorized_information(graph, values, system, least_share=SINGULAR)
         else:
-            factorize_information(system, solved, least_share=SINGULAR)
+            factorize_information(system, assembled, least_share=SINGULAR)
     except NotPositiveDefinite:
         raise singular_information(graph, values) from None
     covariances = joint_covariances(system, groups)
