@@ -239,3 +239,28 @@ def test_robust_options_are_checked_before_any_work():
         assert graph.values is values  # untouched
     result = posegraph.optimize(graph, robust="Cauchy:2", robust_edges="all")
     assert result.summary.robust == "cauchy:2"
+
+
+@pytest.mark.parametrize("group", [SE2, SE3])
+@pytest.mark.parametrize("method", ["lm", "gn"])
+def test_a_map_in_utm_coordinates_converges_at_its_rounding_floor(group, method):
+    """Odometry chains 700 km east and 4000 km north of the origin, composed from their first
+    pose: their residuals cannot fall below about 1e-9 m, where a step changes the values only
+    at rounding level and no longer lowers the error. Every run stops there as converged, as a
+    map near the origin does. Before, 7 of these 40 SE2 chains ended "damping exceeded its
+    limit" and 19 "step raised the error (Gauss-Newton)", not converged."""
+    rng = np.random.default_rng(7)
+    origin = np.array([712345.123, 4000000.25, 55.5])[: group.point_dim]
+    rotations = group.dof - group.point_dim
+    for trial in range(40):
+        place = np.concatenate(
+            [origin + rng.normal(scale=50.0, size=group.point_dim), rng.normal(size=rotations)]
+        )
+        graph = posegraph.PoseGraph(group)
+        graph.add_node(0, group.exp(place))
+        graph.add_nodes(np.arange(1, 5))
+        steps = group.exp(rng.normal(size=(4, group.dof)))
+        graph.add_edges(np.arange(4), np.arange(1, 5), steps, np.eye(group.dof))
+        result = posegraph.optimize(graph, options=SolverOptions(method=method))
+        assert result.summary.converged, (trial, result.summary.termination)
+        assert result.summary.final_error < 1e-12

@@ -315,6 +315,13 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
         if callback is not None and callback(record):
             termination = STOPPED
             break
+        small = step_norm < options.step_tolerance * (size + options.step_tolerance)
+        if not accepted and step_ok and small:
+            # A step that changes the values only at rounding level and still does not lower
+            # the error: the error is at its floating-point floor (a map in UTM coordinates,
+            # whose residuals cannot fall below about 1e-9 m), as Ceres's parameter tolerance.
+            termination, converged = "step below tolerance", True
+            break
         if not accepted:
             if not lm:
                 termination = "step raised the error (Gauss-Newton)"
@@ -337,7 +344,7 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
         ):
             termination, converged = "relative error decrease below tolerance", True
             break
-        if step_norm < options.step_tolerance * (size + options.step_tolerance):
+        if small:
             termination, converged = "step below tolerance", True
             break
         data, gradient, diagonal = _assemble(graph, system, current, clock)
