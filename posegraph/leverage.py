@@ -58,27 +58,25 @@ class _Factored:
     system: NormalEquations
     whitened: np.ndarray
     """r̃ of every between edge."""
-    rows_i: np.ndarray
-    rows_j: np.ndarray
+    rows: np.ndarray
+    """Its rows Aₑ = Ω^½ [Jᵢ Jⱼ] (m, d, 2d)."""
     prior_rows: np.ndarray
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """H⁻¹ rhs for a (size, K) right-hand side, as (num_nodes, d, K), zero on held nodes."""
         return self.system.scatter(self.system.solve(rhs))
 
-    def transposed_rows(
-        self, i: np.ndarray, j: np.ndarray, rows_i: np.ndarray, rows_j: np.ndarray
-    ) -> np.ndarray:
-        """Aᵀ of m edges' rows (m, d, d) at their nodes i and j, as (size, m·d): column
+    def transposed_rows(self, i: np.ndarray, j: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """Aᵀ of m edges' rows (m, d, 2d) at their nodes i and j, as (size, m·d): column
         e·d + b is row b of edge e."""
         system, d = self.system, self.system.dof
         out = np.zeros((system.size, len(i) * d))
         columns = np.arange(len(i) * d).reshape(-1, d, 1)
-        for nodes, rows in ((i, rows_i), (j, rows_j)):
+        for nodes, part in ((i, rows[..., :d]), (j, rows[..., d:])):
             block = system.block_of[nodes]
             free = block >= 0  # held nodes have no columns in H
             places = (block[free, None] * d + np.arange(d))[:, None, :]
-            np.add.at(out, (places, columns[free]), rows[free])
+            np.add.at(out, (places, columns[free]), part[free])
         return out
 
     def rademacher(self, probes: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -92,13 +90,12 @@ class _Factored:
         def transposed_times(rows: np.ndarray, probe: np.ndarray) -> np.ndarray:
             return np.einsum("mba,mb->ma", rows, probe)
 
-        rows = np.concatenate([self.rows_i, self.rows_j], axis=2)  # an edge's piece: i, then j
         rhs = np.stack(
             [
                 self.system.vector(
                     np.concatenate(
                         [
-                            transposed_times(rows, z[k]).ravel(),
+                            transposed_times(self.rows, z[k]).ravel(),
                             transposed_times(self.prior_rows, z_priors[k]).ravel(),
                         ]
                     )
@@ -110,16 +107,16 @@ class _Factored:
         return z, self.solve(rhs)
 
 
-def _whitened(
-    between: Linearization, information: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """r̃ₑ and the rows Aₑ (the i and j parts) of every between edge."""
+def _whitened(between: Linearization, information: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """r̃ₑ and the rows Aₑ = Ω^½ [Jᵢ Jⱼ] (m, d, 2d) of every between edge."""
     root = information_root(information)
-    return (
-        np.einsum("mab,mb->ma", root, between.residuals),
-        root @ between.jac_i,
-        root @ between.jac_j,
-    )
+    return np.einsum("mab,mb->ma", root, between.residuals), root @ between.jacobians
+
+
+def _rows_times(rows: np.ndarray, i: np.ndarray, j: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Aₑ w of edges i → j with rows (m, d, 2d), for w (num_nodes, d, K): (m, d, K)."""
+    d = rows.shape[1]
+    return rows[..., :d] @ w[i] + rows[..., d:] @ w[j]
 
 
 def _factorize(
@@ -188,7 +185,7 @@ class Leverage:
         """Estimated deleted residuals of every between edge of the graph."""
         factored, z, w = self._probed
         i, j = self.graph.edges.i, self.graph.edges.j
-        hat_z = factored.rows_i @ w[i] + factored.rows_j @ w[j]  # (m, d, K): (A w)ₑ
+        hat_z = _rows_times(factored.rows, i, j, w)  # (m, d, K): (A w)ₑ
         hat = hat_z @ np.moveaxis(z, 0, 2).swapaxes(1, 2) / self.probes  # Σₖ (A w)ₑ zₑᵀ / K
         return _deleted(factored.whitened, hat)
 
@@ -196,10 +193,10 @@ class Leverage:
         """Estimated innovation χ² of each edge of ``candidates`` (edges over the graph's nodes
         that it does not hold) against the solution."""
         _, _, w = self._probed
-        whitened, rows_i, rows_j = _whitened(
+        whitened, rows = _whitened(
             linearize_between(self.values, candidates), candidates.information
         )
-        samples = rows_i @ w[candidates.i] + rows_j @ w[candidates.j]  # (m, d, K)
+        samples = _rows_times(rows, candidates.i, candidates.j, w)  # (m, d, K)
         predicted = samples @ np.swapaxes(samples, 1, 2) / self.probes
         eigenvalues, projected = _eigen(whitened, np.eye(self.graph.group.dof) + predicted)
         return (projected**2 / eigenvalues).sum(axis=1)
@@ -213,11 +210,11 @@ class Leverage:
         L Lᵀ, the k-th is ‖(L⁻¹ r̃)ₖ‖², one solve with H's factor of d columns per edge. All
         are ∞ where C or r̃ is not finite, or C not numerically positive definite."""
         factored = self._factored
-        whitened, rows_i, rows_j = _whitened(
+        whitened, rows = _whitened(
             linearize_between(self.values, candidates), candidates.information
         )
-        rows = factored.transposed_rows(candidates.i, candidates.j, rows_i, rows_j)
-        predicted = rows.T @ factored.system.solve(rows)
+        transposed = factored.transposed_rows(candidates.i, candidates.j, rows)
+        predicted = transposed.T @ factored.system.solve(transposed)
         covariance = np.eye(len(predicted)) + 0.5 * (predicted + predicted.T)
         try:
             factor = np.linalg.cholesky(covariance)
@@ -251,7 +248,7 @@ def deleted_residuals(
     ends = np.stack([graph.edges.i[edges], graph.edges.j[edges]], axis=1)
     factored = _factorize(graph, values, linear_solver, covariance_of=ends)
     covariances = joint_covariances(factored.system, ends)
-    rows = np.concatenate([factored.rows_i[edges], factored.rows_j[edges]], axis=2)
+    rows = factored.rows[edges]
     hat = rows @ covariances @ np.swapaxes(rows, 1, 2)  # Aₑ H⁻¹ Aₑᵀ
     return _deleted(factored.whitened[edges], hat)
 
