@@ -7,7 +7,8 @@
 
 Both return the graph, with initial values from composing the noisy odometry, and the truth.
 ``resimulate`` gives any graph a known ground truth: it keeps the graph's edges and information
-and draws new measurements around chosen true poses.
+and draws new measurements around chosen true poses. ``docked`` adds a node that every pose
+measures: one dense row and column in an otherwise sparse problem.
 Measurements are Z = (Xᵢ⁻¹ Xⱼ) · Exp(n), n ~ N(0, Σ), with information Σ⁻¹ (CONVENTIONS.md).
 """
 
@@ -148,3 +149,37 @@ def sphere(
     j = np.concatenate([np.arange(1, count), above])
     sigmas = np.array([translation_sigma] * 3 + [rotation_sigma] * 3)
     return _noisy_graph(truth, i, j, sigmas, rng), truth
+
+
+def docked(
+    graph: PoseGraph, truth: LieGroup, every: int = 1, seed: int = 0
+) -> tuple[PoseGraph, LieGroup]:
+    """A generated graph (edges only, ids 0 … n−1) with a docking station: a pose node put
+    second, after the first pose, that every ``every``-th pose measures with the first edge's
+    information. The dock stands for any node that thousands of edges reach (a second session's
+    anchor, a place revisited all the time); being second, it is early in the elimination
+    order. Returns the graph, whose dock starts where the first pose's measurement of it puts
+    it, and the truth."""
+    rng = np.random.default_rng(seed)
+    group, n = graph.group, graph.num_nodes
+    dock = truth[0] @ group.exp(np.full(group.dof, 0.5))
+    moved = np.arange(n) + (np.arange(n) >= 1)  # old index → new, the dock taking index 1
+    new_truth = group.concatenate([truth[:1], dock[None], truth[1:]])
+    observers = moved[np.arange(0, n, every)]
+    information = np.broadcast_to(graph.edges.information[0], (observers.size,) + (group.dof,) * 2)
+    sightings = noisy_measurements(new_truth, observers, np.ones_like(observers), information, rng)
+    docked_graph = PoseGraph(group)
+    docked_graph.add_nodes(
+        np.arange(n + 1),
+        group.concatenate(
+            [graph.values[:1], (graph.values[0] @ sightings[0])[None], graph.values[1:]]
+        ),
+    )
+    docked_graph.add_edges(
+        moved[graph.edges.i],
+        moved[graph.edges.j],
+        graph.edges.measurements,
+        graph.edges.information,
+    )
+    docked_graph.add_edges(observers, np.ones_like(observers), sightings, information)
+    return docked_graph, new_truth

@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 from posegraph_datasets import EXAMPLES_DIR, example
-from posegraph_datasets.generators import manhattan_world, resimulate, sphere
+from posegraph_datasets.generators import docked, manhattan_world, resimulate, sphere
 from posegraph_datasets.make_examples import example_texts
 
 from posegraph.factors import between_residuals
@@ -32,7 +32,13 @@ def test_unknown_example_names_the_available_ones():
         example("nope.g2o")
 
 
-@pytest.mark.parametrize("generate", [manhattan_world, sphere], ids=["manhattan", "sphere"])
+def _docked_sphere(seed: int):
+    return docked(*sphere(seed=seed), every=2, seed=seed)
+
+
+@pytest.mark.parametrize(
+    "generate", [manhattan_world, sphere, _docked_sphere], ids=["manhattan", "sphere", "docked"]
+)
 def test_optimum_recovers_the_ground_truth(generate):
     """With σ = 0.05 m / 0.01 rad noise the optimum is far closer to the truth than odometry."""
     graph, truth = generate(seed=3)
@@ -43,6 +49,17 @@ def test_optimum_recovers_the_ground_truth(generate):
     assert error_after < 0.3 * error_before
     dof = graph.num_edges * graph.group.dof - (graph.num_nodes - 1) * graph.group.dof
     assert result.summary.final_chi2 == pytest.approx(dof, rel=0.2)  # χ² ≈ its degrees of freedom
+
+
+def test_the_dock_is_the_second_node_and_every_other_pose_measures_it():
+    graph, truth = sphere(seed=4)
+    with_dock, new_truth = docked(graph, truth, every=2, seed=4)
+    assert with_dock.num_nodes == graph.num_nodes + 1
+    sightings = with_dock.edges.j == 1
+    every_other_pose = np.r_[0, np.arange(2, graph.num_nodes, 2) + 1]  # after the dock: + 1
+    np.testing.assert_array_equal(with_dock.edges.i[sightings], every_other_pose)
+    np.testing.assert_allclose(new_truth[2:].as_matrix(), truth[1:].as_matrix())
+    np.testing.assert_allclose(with_dock.values[2:].as_matrix(), graph.values[1:].as_matrix())
 
 
 def test_resimulate_draws_each_edge_with_its_full_information():

@@ -5,10 +5,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import scipy.sparse
+from posegraph_datasets.generators import docked, sphere
 
 from posegraph.factors import linearize_between, linearize_priors
 from posegraph.linear import NormalEquations
-from posegraph.sparse_cholesky import NotPositiveDefinite, available_backends, make_cholesky
+from posegraph.sparse_cholesky import (
+    NotPositiveDefinite,
+    available_backends,
+    builds_transposed,
+    make_cholesky,
+    ones_at,
+)
 
 from .conftest import POSE_GROUPS, random_graph
 
@@ -112,6 +119,42 @@ def test_pivots_are_each_columns_schur_complement_where_it_is_eliminated(
     assert np.log(pivots).sum() == pytest.approx(np.linalg.slogdet(dense)[1], abs=1e-9)
     lowest, highest = 1.0 / np.diag(np.linalg.inv(dense)), np.diag(dense)
     assert np.all(pivots >= lowest * (1 - 1e-9)) and np.all(pivots <= highest * (1 + 1e-9))
+
+
+@pytest.mark.parametrize("long_columns", [0, 3], ids=["short", "long"])
+def test_cvxopt_pattern_holds_each_entry_once_in_column_order(long_columns):
+    """Columns of thousands of entries (a node many edges reach) are built transposed and
+    added; either way the matrix holds ones exactly at the entries, rows sorted per column."""
+    if "cholmod" not in available_backends():
+        pytest.skip("cvxopt is not installed here")
+    rng = np.random.default_rng(78)
+    size = 3000
+    pattern = scipy.sparse.random(size, size, density=0.002, random_state=79).tolil()
+    pattern[:, rng.choice(size, long_columns, replace=False)] = 1.0
+    matrix = pattern.tocsc()
+    matrix.sort_indices()
+    counts = np.diff(matrix.indptr)
+    assert np.count_nonzero(builds_transposed(counts)) == long_columns
+    columns = np.repeat(np.arange(size), counts)
+    shuffled = rng.permutation(matrix.nnz)
+    built = ones_at(matrix.indices[shuffled], columns[shuffled], (size, size))
+    indptr, indices, values = (np.array(part).ravel() for part in built.CCS)
+    np.testing.assert_array_equal(indptr, matrix.indptr)
+    np.testing.assert_array_equal(indices, matrix.indices)
+    np.testing.assert_array_equal(values, 1.0)
+
+
+@pytest.mark.parametrize("backend", available_backends())
+def test_a_node_that_every_pose_measures_solves_as_dense(backend):
+    """A docking station that all 32 poses measure: one dense row and column of blocks, early
+    in the order, whose lower-triangle columns CHOLMOD's pattern builds transposed."""
+    graph = docked(*sphere(4, 8, seed=11), seed=12)[0]
+    held = np.array([0])
+    system = NormalEquations(graph, held, backend)
+    columns = np.repeat(np.arange(system.size), np.diff(system.indptr))
+    lower_counts = np.bincount(columns[system.indices >= columns], minlength=system.size)
+    assert np.flatnonzero(builds_transposed(lower_counts)).tolist() == list(range(6))
+    _assert_matches_dense(system, graph, held, 0.0)
 
 
 def test_pattern_holds_one_block_per_node_and_edge_pair():
