@@ -177,6 +177,7 @@ def spanning_tree_values(
     ).tocsr()
     tree = scipy.sparse.csgraph.minimum_spanning_tree(adjacency)
     _, parent = scipy.sparse.csgraph.breadth_first_order(tree, root, directed=False)
+    parent = parent.astype(np.int64)  # scipy's int32 would overflow in parent · n + child
     parent[root] = root
 
     # Offsets T_v = X_parent⁻¹ X_v: a known value or the identity below the root, else the edge.

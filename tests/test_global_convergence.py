@@ -384,6 +384,21 @@ def test_spanning_tree_prefers_informative_edges():
     )
 
 
+@pytest.mark.parametrize("method", ["odometry", "spanning-tree"])
+def test_a_tree_start_composes_the_measurements_of_a_chain_beyond_46341_poses(method):
+    """The tree's parents come from scipy as int32; an edge's key parent · n + child overflows
+    it from n² > 2³¹ on, and then composed the wrong edges (a 50,000-pose chain started at
+    error 548 and ended unconverged after 100 iterations)."""
+    n = 50_000
+    graph = PoseGraph(SE2)
+    graph.add_node(0, SE2.identity())
+    graph.add_nodes(np.arange(1, n))
+    steps = SE2.exp(np.random.default_rng(68).normal(scale=0.1, size=(n - 1, 3)))
+    graph.add_edges(np.arange(n - 1), np.arange(1, n), steps, np.eye(3))
+    values = initialize(graph, method)
+    np.testing.assert_allclose(values[1:].as_matrix(), (values[:-1] @ steps).as_matrix(), atol=1e-9)
+
+
 @pytest.mark.parametrize("name", BENCHMARK_GRAPHS)
 def test_defaults_reach_the_best_known_error(shared_dataset, name):
     """From the file's values (or none), with defaults: at most best known + 1e-6 relative
