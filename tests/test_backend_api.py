@@ -48,6 +48,45 @@ def test_batch_and_single_editing_with_arrays():
         graph.add_node(12, SE2.identity())
 
 
+def test_a_graph_built_one_node_and_edge_at_a_time_equals_one_built_at_once():
+    """Added parts are joined when the graph is next read: reads, copies and pickles between
+    the additions see every part added so far, and never the later ones."""
+    rng = np.random.default_rng(81)
+    n = 40
+    values = SE3.exp(rng.normal(size=(n, 6)))
+    measured = values[:-1].between(values[1:])
+    information = np.eye(6) * rng.uniform(1, 9, size=(n - 1, 1, 1))
+    at_once = PoseGraph(SE3)
+    at_once.add_nodes(np.arange(n), values)
+    at_once.add_edges(np.arange(n - 1), np.arange(1, n), measured, information)
+    at_once.add_priors([5, 20], values[[5, 20]], np.eye(6))
+    one_by_one = PoseGraph(SE3)
+    snapshots = {}
+    for k in range(n):
+        assert one_by_one.add_node(k, values[k]) == k
+        if k:
+            assert one_by_one.add_edge(k - 1, k, measured[k - 1], information[k - 1]) == k - 1
+        if k in (5, 20):
+            one_by_one.add_prior(k, values[k], np.eye(6))
+        if k % 7 == 3:
+            snapshots[k] = (one_by_one.copy(), pickle.loads(pickle.dumps(one_by_one)))
+        assert one_by_one.num_nodes == k + 1 and one_by_one.num_edges == k
+    for k, taken in snapshots.items():
+        for snapshot in taken:
+            assert snapshot.num_nodes == k + 1 and len(snapshot.edges) == k
+            np.testing.assert_array_equal(snapshot.node_ids, np.arange(k + 1))
+            np.testing.assert_allclose(snapshot.values.as_matrix(), values[: k + 1].as_matrix())
+    for name in ("node_ids", "fixed", "initialized"):
+        np.testing.assert_array_equal(getattr(one_by_one, name), getattr(at_once, name))
+    np.testing.assert_array_equal(one_by_one.values.as_matrix(), at_once.values.as_matrix())
+    for kind in ("edges", "priors"):
+        built, expected = getattr(one_by_one, kind), getattr(at_once, kind)
+        assert built.starts_with(expected) and len(built) == len(expected)
+    assert posegraph.optimize(one_by_one).summary.final_error == pytest.approx(
+        posegraph.optimize(at_once).summary.final_error, abs=1e-12
+    )
+
+
 def test_information_is_checked_where_it_is_given():
     """Shape, finiteness, symmetry and positive semi-definiteness, with the measurement named;
     a zero eigenvalue (a direction not measured, as a position-only prior) is accepted."""
