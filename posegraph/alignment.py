@@ -44,21 +44,47 @@ def similarity_fit(
     source: np.ndarray, target: np.ndarray, weights: np.ndarray, with_scale: bool = False
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """(R, t, s) minimising Σₖ wₖ ‖yₖ − (s R xₖ + t)‖² over (N, d) points, any d, with weights
-    wₖ ≥ 0 of positive sum; s = 1 without scale.
+    wₖ ≥ 0 of positive sum; s = 1 without scale (``similarity_fits`` of one group)."""
+    rotation, translation, scale = similarity_fits(
+        source, target, weights, np.zeros(len(source), dtype=np.int64), 1, with_scale
+    )
+    return rotation[0], translation[0], float(scale[0])
+
+
+def similarity_fits(
+    source: np.ndarray,
+    target: np.ndarray,
+    weights: np.ndarray,
+    groups: np.ndarray,
+    count: int,
+    with_scale: bool = False,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``similarity_fit`` of every group of points at once: (R (count, d, d), t (count, d),
+    s (count,)) fitting the points k with ``groups[k]`` = g; each group's weights have a
+    positive sum, and a group with no points gets the identity.
 
     Umeyama eqs. 34–42, weighted: with μ = Σₖ wₖ pₖ / Σₖ wₖ, the cross-covariance
     Σ = Σₖ wₖ (yₖ − μ_y)(xₖ − μ_x)ᵀ / Σₖ wₖ = U D Vᵀ and S = diag(1, …, 1, det(U)det(V)):
     R = U S Vᵀ, s = tr(D S)/σ_x², t = μ_y − s R μ_x. Points with no spread give R = I.
     """
-    weights = weights / weights.sum()
-    mu_x, mu_y = weights @ source, weights @ target
-    x, y = source - mu_x, target - mu_y
-    u, d, vt = np.linalg.svd((weights[:, None] * y).T @ x)
-    sign = np.ones(source.shape[1])
-    sign[-1] = np.sign(np.linalg.det(u) * np.linalg.det(vt))
-    rotation = u @ np.diag(sign) @ vt
-    scale = float(d @ sign / (weights @ np.sum(x * x, axis=1))) if with_scale else 1.0
-    return rotation, mu_y - scale * rotation @ mu_x, scale
+    d = source.shape[1]
+    share = weights / np.bincount(groups, weights, count)[groups]
+
+    def group_sums(terms: np.ndarray) -> np.ndarray:
+        sums = np.zeros((count,) + terms.shape[1:])
+        np.add.at(sums, groups, terms)
+        return sums
+
+    mu_x, mu_y = group_sums(share[:, None] * source), group_sums(share[:, None] * target)
+    x, y = source - mu_x[groups], target - mu_y[groups]
+    u, singular, vt = np.linalg.svd(group_sums(share[:, None, None] * y[:, :, None] * x[:, None]))
+    sign = np.ones((count, d))
+    sign[:, -1] = np.sign(np.linalg.det(u) * np.linalg.det(vt))
+    rotation = (u * sign[:, None, :]) @ vt
+    scale = np.ones(count)
+    if with_scale:
+        scale = np.sum(singular * sign, axis=1) / group_sums(share * np.sum(x * x, axis=1))
+    return rotation, mu_y - scale[:, None] * np.einsum("gij,gj->gi", rotation, mu_x), scale
 
 
 def _mean_square(points: np.ndarray) -> float:

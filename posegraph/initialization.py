@@ -12,7 +12,7 @@ import numpy as np
 import scipy.sparse
 import scipy.sparse.csgraph
 
-from .alignment import similarity_fit
+from .alignment import similarity_fits
 from .graph import PoseGraph, named_nodes
 from .lie import LieGroup
 
@@ -80,44 +80,61 @@ def align_to_priors(graph: PoseGraph, values: LieGroup) -> LieGroup:
     which Levenberg-Marquardt may not reach priors far away (UTM coordinates) or turned.
 
     With priors weighing position at two or more distinct points, T is the weighted fit of the
-    component's positions to theirs (``similarity_fit`` without scale, weights tr(Ω_tt)/d), so a
-    GNSS track sets the heading. Otherwise T = Z X⁻¹ for the prior of largest tr Ω, or only the
-    shift onto its position if it weighs nothing but position.
+    component's positions to theirs (``similarity_fits`` without scale, weights tr(Ω_tt)/d), so
+    a GNSS track sets the heading. Otherwise T = Z X⁻¹ for the prior of largest tr Ω (the first
+    of equals), or only the shift onto its position if it weighs nothing but position. All
+    components are aligned at once.
     """
     priors = graph.priors
     if len(priors) == 0:
         return values
     group, d = graph.group, graph.group.point_dim
     labels = graph.components()
+    count = int(labels.max()) + 1
+    set_by_priors = graph.components_set_by_priors()
     prior_labels = labels[priors.i]
     position_weights = np.trace(priors.information[:, :d, :d], axis1=1, axis2=2) / d
     other_weights = np.trace(priors.information[:, d:, d:], axis1=1, axis2=2)
-    for component in np.flatnonzero(graph.components_set_by_priors()):
-        mine = np.flatnonzero(prior_labels == component)
-        placed = mine[position_weights[mine] > 0]
-        targets = priors.measurements.translation[placed]
-        if placed.size >= 2 and np.ptp(targets, axis=0).max() > 1e-12 * np.abs(targets).max():
-            rotation, translation, _ = similarity_fit(
-                values.translation[priors.i[placed]], targets, position_weights[placed]
-            )
-            transform = _rigid(group, rotation, translation)
-        else:
-            k = mine[np.argmax(position_weights[mine] + other_weights[mine])]
-            value, measurement = values[priors.i[k]], priors.measurements[k]
-            if other_weights[k] > 0:
-                transform = measurement @ value.inverse()
-            else:
-                transform = _rigid(group, np.eye(d), measurement.translation - value.translation)
-        nodes = np.flatnonzero(labels == component)
-        values = values.set_at(nodes, transform @ values[nodes])
-    return values
+    targets = priors.measurements.translation
+
+    placed = set_by_priors[prior_labels] & (position_weights > 0)
+    highest, lowest = np.full((count, d), -np.inf), np.full((count, d), np.inf)
+    np.maximum.at(highest, prior_labels[placed], targets[placed])
+    np.minimum.at(lowest, prior_labels[placed], targets[placed])
+    largest = np.maximum(np.abs(highest), np.abs(lowest)).max(axis=1)
+    spread = np.max(highest - lowest, axis=1) > 1e-12 * largest
+    fitted = placed & spread[prior_labels]
+    rotation, translation, _ = similarity_fits(
+        values.translation[priors.i[fitted]],
+        targets[fitted],
+        position_weights[fitted],
+        prior_labels[fitted],
+        count,
+    )
+    transforms = _rigid(group, rotation, translation)
+
+    by_weight = np.lexsort(
+        (np.arange(len(priors)), -(position_weights + other_weights), prior_labels)
+    )
+    heaviest = by_weight[np.diff(prior_labels[by_weight], prepend=-1) != 0]  # per component
+    best = heaviest[set_by_priors[prior_labels[heaviest]] & ~spread[prior_labels[heaviest]]]
+    value, measurement = values[priors.i[best]], priors.measurements[best]
+    full = other_weights[best] > 0
+    shifts = _rigid(group, np.eye(d), measurement.translation - value.translation)
+    transforms = transforms.set_at(prior_labels[best[full]], (measurement @ value.inverse())[full])
+    transforms = transforms.set_at(prior_labels[best[~full]], shifts[~full])
+
+    moved = np.flatnonzero(set_by_priors[labels])
+    return values.set_at(moved, transforms[labels[moved]] @ values[moved])
 
 
 def _rigid(group: type[LieGroup], rotation: np.ndarray, translation: np.ndarray) -> LieGroup:
-    """The element p ↦ R p + t of ``group`` (of scale 1 for Sim3)."""
+    """Elements p ↦ R p + t of ``group`` (of scale 1 for Sim3) from (…, d, d) rotations and
+    (…, d) translations."""
     d = group.point_dim
-    matrix = np.eye(d + 1)
-    matrix[:d, :d], matrix[:d, d] = rotation, translation
+    batch = np.broadcast_shapes(rotation.shape[:-2], translation.shape[:-1])
+    matrix = np.zeros(batch + (d + 1, d + 1))
+    matrix[..., :d, :d], matrix[..., :d, d], matrix[..., d, d] = rotation, translation, 1.0
     return group.from_matrix(matrix)
 
 

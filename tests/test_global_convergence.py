@@ -366,6 +366,47 @@ def test_a_component_with_one_full_prior_is_placed_on_it():
         np.testing.assert_allclose(values[5].as_matrix(), measurement.as_matrix(), atol=1e-9)
 
 
+@pytest.mark.parametrize("group", [SE2, SE3, Sim3], ids=lambda g: g.__name__)
+def test_components_are_placed_on_their_own_priors_all_at_once(group):
+    """Components set by position fixes at four points (two such), by one full prior, by one
+    position-only prior, by two equal priors on rotation only that disagree (the first
+    counts) and by none, in one graph: each lands where it lands alone."""
+    rng = np.random.default_rng(69)
+    d, dof = group.point_dim, group.dof
+    position_only = np.diag(np.where(np.arange(dof) < d, 1.0, 0.0))
+    setups = [
+        (np.arange(4) * 2, position_only),
+        (np.arange(4) + 3, 3.0 * position_only),
+        ([3], np.eye(dof)),
+        ([5], position_only),
+        ([1, 4], np.eye(dof) - position_only),
+        ([], np.eye(dof)),
+    ]
+    graph = PoseGraph(group)
+    for c, (fixed_at, information) in enumerate(setups):
+        part = random_graph(group, 8, 2, seed=70 + c, noise=0.02)
+        ids = part.node_ids + 1000 * c
+        graph.add_nodes(ids, part.values)
+        graph.add_edges(
+            ids[part.edges.i], ids[part.edges.j], part.edges.measurements, part.edges.information
+        )
+        if len(fixed_at):
+            moved = group.exp(5.0 * rng.normal(size=(len(fixed_at), dof))) @ part.values[fixed_at]
+            graph.add_priors(ids[fixed_at], moved, information)
+    labels = graph.components()
+    first_of_equals = graph.priors.i[-2]
+    for method in ("odometry", "chordal"):
+        together = initialize(graph, method)
+        for c in range(len(setups)):
+            alone = initialize(graph.subgraph(labels == c), method)
+            np.testing.assert_allclose(
+                together[labels == c].as_matrix(), alone.as_matrix(), atol=1e-9
+            )
+        np.testing.assert_allclose(
+            together[first_of_equals].as_matrix(), graph.priors.measurements[-2].as_matrix()
+        )
+
+
 def test_spanning_tree_prefers_informative_edges():
     """With a weak odometry edge, the spanning tree goes around it through a strong loop."""
     graph = PoseGraph(SE2)
