@@ -71,9 +71,9 @@ def similarity_fits(
     share = weights / np.bincount(groups, weights, count)[groups]
 
     def group_sums(terms: np.ndarray) -> np.ndarray:
-        sums = np.zeros((count,) + terms.shape[1:])
-        np.add.at(sums, groups, terms)
-        return sums
+        columns = terms.reshape(len(terms), int(np.prod(terms.shape[1:]))).T
+        sums = np.stack([np.bincount(groups, column, count) for column in columns], axis=-1)
+        return sums.reshape((count,) + terms.shape[1:])
 
     mu_x, mu_y = group_sums(share[:, None] * source), group_sums(share[:, None] * target)
     x, y = source - mu_x[groups], target - mu_y[groups]
