@@ -7,8 +7,12 @@ graph optimization", §IV-B and §V).
    sharing one sparse matrix, solved with one factorisation. Each result is projected to the
    nearest rotation (SVD).
 2. Sim3 only: log-scales by linear least squares, σⱼ − σᵢ = log sₑ, weighted by Ω_σσ.
-3. Translations, given rotations and scales: minimise
-   Σₑ (tⱼ − tᵢ − sᵢ Rᵢ Δtₑ)ᵀ Rᵢ Ω_tt Rᵢᵀ / sᵢ² (…), a linear least-squares problem.
+3. Translations, given rotations and scales: for SE2 and SE3, minimise
+   Σₑ (tⱼ − tᵢ − Rᵢ Δtₑ)ᵀ Rᵢ Ω_tt Rᵢᵀ (…), a linear least-squares problem. For Sim3, compose
+   tⱼ = tᵢ + sᵢ Rᵢ Δtₑ along the spanning tree (odometry first) from the held nodes. The scales
+   of step 2 come from the log-scale information alone, and least squares spread their errors
+   through the map: Levenberg-Marquardt then crawled along a curved valley (a 3000-keyframe
+   monocular sequence, 61 iterations; 7 from the composed translations).
 
 Any information matrix is accepted: the rotation weight wₑ is the mean eigenvalue of the
 rotation block of Ωₑ (its trace over d_rot), and the translation block Ω_tt is used whole.
@@ -24,6 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from .graph import PoseGraph
+from .initialization import spanning_tree
 from .lie import SE2, SE3, LieGroup, Sim3
 from .lie.so3 import project_to_rotation
 from .linear import BlockPattern, free_block_index
@@ -85,6 +90,23 @@ def _solve(
     return pattern.scatter(pattern.solve(-rhs))
 
 
+def _composed_translations(
+    graph: PoseGraph, held: np.ndarray, translation: np.ndarray, steps: np.ndarray
+) -> np.ndarray:
+    """Translations composed along the spanning tree from the held nodes' ``translation``
+    (n, d): each child's is its parent's plus the ``steps`` tⱼ − tᵢ (m, d) of its tree edge
+    i → j, or minus them where the edge runs from the child."""
+    n = graph.num_nodes
+    known = np.zeros(n, dtype=bool)
+    known[held] = True
+    tree = spanning_tree(graph, known)
+    offsets = np.zeros((n + 1, translation.shape[1]))
+    offsets[held] = translation[held]
+    along = steps[tree.edge]
+    offsets[tree.children] = np.where(tree.reversed[:, None], -along, along)
+    return tree.accumulated(offsets, np.add)[:n]
+
+
 def chordal_values(graph: PoseGraph) -> LieGroup:
     """Initial values of an SE2, SE3 or Sim3 graph by chordal relaxation (module docstring)."""
     group = graph.group
@@ -136,17 +158,19 @@ def chordal_values(graph: PoseGraph) -> LieGroup:
         log_scale = kept(log_scale, np.log(start_scale), scale_weight)
     scale = np.exp(log_scale)
 
-    # Translations: r = tⱼ − tᵢ − sᵢ Rᵢ Δt with weight W = Rᵢ Ω_tt Rᵢᵀ / sᵢ² (the between
-    # residual's translation is Rᵢᵀ (tⱼ − tᵢ)/sᵢ − Δt); Jᵢ = −I, Jⱼ = I.
-    world = rotation[i] @ translation_information @ np.swapaxes(rotation[i], 1, 2)
-    world = world / scale[i, None, None] ** 2
+    # Translations: tⱼ − tᵢ = sᵢ Rᵢ Δt of every edge (the between residual's translation is
+    # Rᵢᵀ (tⱼ − tᵢ)/sᵢ − Δt).
+    steps = scale[i, None] * np.einsum("mab,mb->ma", rotation[i], measured_translation)
     translation = np.zeros((n, d))
     translation[held] = held_translation
-    offsets = scale[i, None] * np.einsum("mab,mb->ma", rotation[i], measured_translation)
-    r0 = translation[j] - translation[i] - offsets
-    weighted = np.einsum("mab,mb->ma", world, r0)[:, :, None]
-    pieces = np.stack([-weighted, weighted], axis=1)
-    translation += _solve(pattern, world, -world, pieces)[:, :, 0]
+    if group is Sim3:
+        translation = _composed_translations(graph, held, translation, steps)
+    else:  # least squares: r = tⱼ − tᵢ − Rᵢ Δt, weight W = Rᵢ Ω_tt Rᵢᵀ; Jᵢ = −I, Jⱼ = I
+        world = rotation[i] @ translation_information @ np.swapaxes(rotation[i], 1, 2)
+        r0 = translation[j] - translation[i] - steps
+        weighted = np.einsum("mab,mb->ma", world, r0)[:, :, None]
+        pieces = np.stack([-weighted, weighted], axis=1)
+        translation += _solve(pattern, world, -world, pieces)[:, :, 0]
     translation_weight = np.trace(translation_information, axis1=1, axis2=2)
     translation = kept(translation, start_translation, translation_weight)
     if group is SE2:

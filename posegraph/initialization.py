@@ -8,6 +8,9 @@ the remaining depth), so a chain of N poses costs O(log N) batched compositions.
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Callable
+
 import numpy as np
 import scipy.sparse
 import scipy.sparse.csgraph
@@ -159,22 +162,42 @@ def edge_weights(graph: PoseGraph, prefer: str) -> np.ndarray:
     raise ValueError(f"prefer is 'odometry' or 'information', not {prefer!r}")
 
 
-def spanning_tree_values(
-    graph: PoseGraph, known: np.ndarray | None = None, prefer: str = "odometry"
-) -> LieGroup:
-    """Values from composing measurements along a minimum spanning tree (``edge_weights``).
+@dataclasses.dataclass(frozen=True)
+class SpanningTree:
+    """A minimum spanning tree (``edge_weights``) under a virtual root, index n, joined to the
+    known nodes and to the first node of every component without one. ``parent`` (n + 1,) is
+    each node's parent (the root's is itself); each node in ``children`` hangs from its parent
+    by between edge ``edge``, measured child → parent where ``reversed``."""
 
-    ``known`` marks nodes whose current values are kept; each connected component without a
-    known node starts at the identity at its lowest id.
-    """
+    parent: np.ndarray
+    children: np.ndarray
+    edge: np.ndarray
+    reversed: np.ndarray
+
+    def accumulated(self, offsets, combine: Callable):
+        """Each node's ``offsets`` (n + 1,) combined from the root down to it, as
+        ``combine(above, below)``: pointer jumping, log₂ depth steps."""
+        parent = self.parent
+        while True:
+            grandparent = parent[parent]
+            if np.array_equal(grandparent, parent):
+                return offsets
+            offsets = combine(offsets[parent], offsets)
+            parent = grandparent
+
+
+def spanning_tree(
+    graph: PoseGraph, known: np.ndarray | None = None, prefer: str = "odometry"
+) -> SpanningTree:
+    """The minimum spanning tree of ``edge_weights`` (see ``SpanningTree``); ``known`` marks
+    nodes hung from the root."""
     n = graph.num_nodes
-    group = graph.group
     known = np.zeros(n, dtype=bool) if known is None else np.asarray(known, dtype=bool)
     i, j = graph.edges.i, graph.edges.j
     weights = edge_weights(graph, prefer)
 
     first_of_component = graph.component_roots()
-    root = n  # a virtual node joined to the known nodes and to every component's first node
+    root = n
     anchors = np.concatenate([np.flatnonzero(known), first_of_component])
     anchor_weights = np.concatenate(
         [
@@ -196,28 +219,39 @@ def spanning_tree_values(
     _, parent = scipy.sparse.csgraph.breadth_first_order(tree, root, directed=False)
     parent = parent.astype(np.int64)  # scipy's int32 would overflow in parent · n + child
     parent[root] = root
+    children = np.flatnonzero(parent[:n] != root)
+    edge, reversed_ = _tree_edges(graph, parent[children], children)
+    return SpanningTree(parent, children, edge, reversed_)
 
+
+def spanning_tree_values(
+    graph: PoseGraph, known: np.ndarray | None = None, prefer: str = "odometry"
+) -> LieGroup:
+    """Values from composing measurements along a minimum spanning tree (``spanning_tree``).
+
+    ``known`` marks nodes whose current values are kept; each connected component without a
+    known node starts at the identity at its lowest id.
+    """
+    n = graph.num_nodes
+    known = np.zeros(n, dtype=bool) if known is None else np.asarray(known, dtype=bool)
+    tree = spanning_tree(graph, known, prefer)
     # Offsets T_v = X_parent⁻¹ X_v: a known value or the identity below the root, else the edge.
-    from_root = np.flatnonzero(parent[:n] == root)
+    from_root = np.flatnonzero(tree.parent[:n] == n)
     known_from_root = from_root[known[from_root]]
-    tree_nodes = np.flatnonzero(parent[:n] != root)
+    measured = graph.edges.measurements[tree.edge]
+    along = measured.set_at(tree.reversed, measured[tree.reversed].inverse())
     offsets = (
-        group.identity((n + 1,))
+        graph.group.identity((n + 1,))
         .set_at(known_from_root, graph.values[known_from_root])
-        .set_at(tree_nodes, _edge_offsets(graph, parent[tree_nodes], tree_nodes))
+        .set_at(tree.children, along)
     )
-
-    while True:
-        grandparent = parent[parent]
-        if np.array_equal(grandparent, parent):
-            break
-        offsets = offsets[parent] @ offsets
-        parent = grandparent
-    return offsets[:n]
+    return tree.accumulated(offsets, lambda above, below: above @ below)[:n]
 
 
-def _edge_offsets(graph: PoseGraph, parents: np.ndarray, children: np.ndarray) -> LieGroup:
-    """X_parent⁻¹ X_child from the measurement of an edge joining them (inverted if reversed)."""
+def _tree_edges(
+    graph: PoseGraph, parents: np.ndarray, children: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """An edge joining each parent and child, and whether it runs child → parent."""
     n = graph.num_nodes
     i, j = graph.edges.i, graph.edges.j
     forward_keys = i * n + j
@@ -227,6 +261,5 @@ def _edge_offsets(graph: PoseGraph, parents: np.ndarray, children: np.ndarray) -
     pos_f = np.clip(np.searchsorted(forward_keys, wanted, sorter=order_f), 0, len(i) - 1)
     pos_b = np.clip(np.searchsorted(backward_keys, wanted, sorter=order_b), 0, len(i) - 1)
     edge_f, edge_b = order_f[pos_f], order_b[pos_b]
-    measurements = graph.edges.measurements
-    backward = np.flatnonzero(forward_keys[edge_f] != wanted)
-    return measurements[edge_f].set_at(backward, measurements[edge_b[backward]].inverse())
+    reversed_ = forward_keys[edge_f] != wanted
+    return np.where(reversed_, edge_b, edge_f), reversed_

@@ -51,7 +51,7 @@ def _not_json(constant: str):
     raise ValueError(f"{constant} is not JSON")
 
 
-def run_json(command: str, *args, check_exit: int = 0):
+def run_json(command: str, *args, check_exit: int | None = 0):
     completed = run(command, *args, "--json", check_exit=check_exit)
     document = json.loads(completed.stdout, parse_constant=_not_json)  # no NaN or Infinity
     jsonschema.validate(document, SCHEMAS[command])
@@ -763,7 +763,8 @@ def test_scale_drift_command_rejects_false_loops(tmp_path):
     source, _, false = monocular_file(tmp_path, false_loops=0.3)
     assert false.size == 9
     without = run_json("scale-drift", clean, "--gt", truth)
-    plain = run_json("scale-drift", source, "--gt", truth, "--max-iterations", 3000)
+    # Least squares bends to the false loops and may crawl there: whether it converges is moot.
+    plain = run_json("scale-drift", source, "--gt", truth, check_exit=None)
     robust = run_json("scale-drift", source, "--gt", truth, "--robust", "gnc")
     assert plain["ate_after"] > 10 * without["ate_after"]
     assert robust["summary"]["rejected_edges"] == false.tolist()

@@ -289,19 +289,17 @@ def test_covariances_of_a_map_that_can_turn_about_position_only_edges_can_be_ref
     assert posegraph.marginals(joined, [1048], require_measured=True)[0].max() < 10.0
 
 
-@pytest.mark.parametrize(
-    ("method", "nodes"),
-    [("odometry", "4, 5"), ("spanning-tree", "4, 5"), ("chordal", r"1, 2, 3, … \(5 nodes\)")],
-)
-def test_an_initialisation_beyond_double_precision_is_refused_naming_the_nodes(method, nodes):
+@pytest.mark.parametrize("method", ["odometry", "spanning-tree", "chordal"])
+def test_an_initialisation_beyond_double_precision_is_refused_naming_the_nodes(method):
     """``sim3_scale_chain`` composes to e^800 at node 4 and e^1000 at node 5 (the loop 0 → 2
-    agrees with the chain): no double holds them. Chordal relaxation solves for every
-    translation at once, scaled by those scales, and loses all but node 0's."""
+    agrees with the chain): no double holds them. Chordal relaxation composes Sim3 translations
+    along the tree as the others do, so it names the same nodes (solving for every translation
+    at once, it lost all but node 0's)."""
     graph = sim3_scale_chain(with_values=False)
     graph.add_edge(0, 2, SCALE_STEP @ SCALE_STEP, np.eye(7))
     message = (
         rf"the {method} initialisation composes the measurements to values beyond double"
-        rf" precision at nodes {nodes}: a translation or scale too large to hold"
+        r" precision at nodes 4, 5: a translation or scale too large to hold"
     )
     with warnings.catch_warnings():
         warnings.simplefilter("error")
@@ -529,14 +527,15 @@ def test_gnc_searches_with_its_own_initial_damping_unless_the_options_set_one():
     validated with, and its final solve at least squares' default; a λ the caller sets serves
     every solve. A record's λ is the one after its iteration's update: at most twice the start
     (a rejection), at least a third of it (an acceptance). The final solve iterates on the
-    monocular sequence with weak scale information (on the city it starts converged)."""
+    monocular sequence of 3% drift with weak scale information (on the city it starts
+    converged)."""
 
     def starts(graph, options):
         records = posegraph.optimize(graph, robust="gnc", options=options).summary.iterations
         firsts = [r for k, r in enumerate(records) if k == 0 or records[k - 1].stage != r.stage]
         return {r.stage: r.damping for r in firsts}
 
-    sequence = monocular_sequence(drift=0.02, seed=1).sim3_graph(100.0)
+    sequence = monocular_sequence(drift=0.03, seed=1).sim3_graph(100.0)
     corrupted, _ = add_false_loops(sequence, 0.3, seed=1)
     found = starts(corrupted, None)
     assert "final" in found
