@@ -273,6 +273,11 @@ class PoseGraph:
         self.structure_version = 0
         """Incremented by every change that alters the sparsity pattern or the gauge."""
 
+    def __copy__(self) -> PoseGraph:
+        """``copy.copy`` gives ``copy()``: a shallow copy would share the id index and the parts
+        still to be joined, so that what is added to one would show in the other."""
+        return self.copy()
+
     def __getstate__(self) -> dict:
         """Pickled and deep-copied without ``last_result``: its factorisation holds CHOLMOD
         handles that cannot be pickled. A copy still warm-starts from its values."""

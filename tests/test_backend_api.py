@@ -49,8 +49,8 @@ def test_batch_and_single_editing_with_arrays():
 
 
 def test_a_graph_built_one_node_and_edge_at_a_time_equals_one_built_at_once():
-    """Added parts are joined when the graph is next read: reads, copies and pickles between
-    the additions see every part added so far, and never the later ones."""
+    """Added parts are joined when the graph is next read: reads, copies (``copy.copy`` too)
+    and pickles between the additions see every part added so far, and never the later ones."""
     rng = np.random.default_rng(81)
     n = 40
     values = SE3.exp(rng.normal(size=(n, 6)))
@@ -69,7 +69,11 @@ def test_a_graph_built_one_node_and_edge_at_a_time_equals_one_built_at_once():
         if k in (5, 20):
             one_by_one.add_prior(k, values[k], np.eye(6))
         if k % 7 == 3:
-            snapshots[k] = (one_by_one.copy(), pickle.loads(pickle.dumps(one_by_one)))
+            snapshots[k] = (
+                one_by_one.copy(),
+                copy.copy(one_by_one),
+                pickle.loads(pickle.dumps(one_by_one)),
+            )
         assert one_by_one.num_nodes == k + 1 and one_by_one.num_edges == k
     for k, taken in snapshots.items():
         for snapshot in taken:
