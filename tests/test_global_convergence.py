@@ -524,10 +524,11 @@ def test_gnc_rejects_false_loops_on_a_generated_city(fraction):
 
 def test_gnc_searches_with_its_own_initial_damping_unless_the_options_set_one():
     """GNC's search starts Levenberg-Marquardt at λ = ``gnc.INITIAL_DAMPING``, the value it was
-    validated with, and its final solve at least squares' default; a λ the caller sets serves
-    every solve. A record's λ is the one after its iteration's update: at most twice the start
-    (a rejection), at least a third of it (an acceptance). The final solve iterates on the
-    monocular sequence of 3% drift with weak scale information (on the city it starts
+    validated with, and its fresh starts (the consistency pass from the chordal relaxation) and
+    final solve at least squares' default; a λ the caller sets serves every solve. A record's λ
+    is the one after its iteration's update: at most twice the start (a rejection), at least a
+    third of it (an acceptance, λ·(1/3) as the solver rounds it). The final solve iterates on
+    the monocular sequence of 3% drift with weak scale information (on the city it starts
     converged)."""
 
     def starts(graph, options):
@@ -538,16 +539,17 @@ def test_gnc_searches_with_its_own_initial_damping_unless_the_options_set_one():
     sequence = monocular_sequence(drift=0.03, seed=1).sim3_graph(100.0)
     corrupted, _ = add_false_loops(sequence, 0.3, seed=1)
     found = starts(corrupted, None)
-    assert "final" in found
+    assert {"final", "consistency (chordal)", "consistency"} <= found.keys()
     for stage, damping in found.items():
-        start = DEFAULT_INITIAL_DAMPING if stage == "final" else gnc.INITIAL_DAMPING
-        assert start / 3 <= damping <= 2 * start, stage
+        fresh = stage in ("final", "consistency (chordal)")
+        start = DEFAULT_INITIAL_DAMPING if fresh else gnc.INITIAL_DAMPING
+        assert start * (1.0 / 3.0) <= damping <= 2 * start, stage
     city, _ = manhattan_world(num_poses=100, seed=67)
     corrupted, _ = add_false_loops(city, 0.1, seed=2)
     found = starts(corrupted, posegraph.SolverOptions(initial_damping=1e-3))
-    assert "final" in found
+    assert {"final", "consistency (chordal)"} <= found.keys()
     for stage, damping in found.items():
-        assert 1e-3 / 3 <= damping <= 2e-3, stage
+        assert 1e-3 * (1.0 / 3.0) <= damping <= 2e-3, stage
 
 
 def test_gnc_settles_from_its_values_too_where_chordal_lands_in_a_worse_basin(monkeypatch):
@@ -925,7 +927,7 @@ def test_a_gnc_run_reports_every_solve_and_stops_when_asked():
     assert np.all(np.diff([r.elapsed for r in history]) >= 0)
     stages = [r.stage for r in history]
     assert stages[0] == "least squares"
-    assert {"gnc round 1 (warm)", "gnc round 1 (chordal)", "consistency"} <= set(stages)
+    assert {"gnc round 1 (warm)", "gnc round 1 (chordal)", "consistency (chordal)"} <= set(stages)
     phases = sum(summary.phase_times.values())
     assert min(summary.phase_times.values()) >= 0
     assert 0.9 * (summary.total_time - summary.initialization_time) <= phases

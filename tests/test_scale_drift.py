@@ -11,6 +11,7 @@ import posegraph
 from posegraph import lifting
 from posegraph.alignment import umeyama
 from posegraph.chordal import chordal_values
+from posegraph.factors import chi2
 from posegraph.graph import PoseGraph
 from posegraph.io import ReadOptions
 from posegraph.io.writer import format_g2o, sim3_edge_lines
@@ -334,6 +335,25 @@ def test_gnc_rejects_false_sim3_loops_of_a_monocular_sequence(
     np.testing.assert_allclose(robust.scales, clean.scales, rtol=scale)
     plain = correct_scale_drift(corrupted)
     assert sequence.ate(plain.poses) > 10 * sequence.ate(clean.poses)
+
+
+@pytest.mark.parametrize("drift, seed", [(0.024, 0), (0.025, 1)])
+def test_gnc_ends_at_the_correction_without_the_false_loops_from_a_fresh_start(drift, seed):
+    """30% false loops heard by the default lift: GNC rejects exactly them, and its consistency
+    pass solves the true loops from their chordal relaxation. Started at GNC's own λ = 1e-10,
+    Levenberg-Marquardt crawled along a valley from there for 100 iterations, and GNC ended in
+    another basin (ATE 5.3 and 5.0 m, against 1.8 and 2.2 m without the false loops; measured).
+    Started as least squares starts, it ends at the correction without the false loops: no
+    higher least-squares cost over the true loops, and the same ATE."""
+    sequence = monocular_sequence(drift=drift, seed=seed)
+    corrupted, false = sequence.sim3_graph_with_false_loops(0.3, seed=seed)
+    without = corrupted.with_edges(~false)
+    clean = correct_scale_drift(without)
+    robust = correct_scale_drift(corrupted, robust="gnc")
+    assert robust.result.summary.rejected_edges == np.flatnonzero(false).tolist()
+    cost = 0.5 * chi2(robust.result.values, without.edges, without.priors)
+    assert cost <= clean.result.summary.final_error * (1 + 1e-6)
+    assert sequence.ate(robust.poses) < 1.01 * sequence.ate(clean.poses)
 
 
 def test_gnc_readmits_the_true_loops_of_a_far_drifted_sequence_together(monkeypatch):
