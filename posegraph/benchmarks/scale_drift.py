@@ -56,7 +56,7 @@ def run(
         before = sequence.ate(sequence.odometry.values)
         after, se3_ate = sequence.ate(corrected.poses), sequence.ate(se3.values)
         row = (
-            f"{drift:.1%} | {seed} | {before:.4g} | {se3_ate:.4g} | {after:.4g} | {before / after:.0f}× "
+            f"{_percent(drift)} | {seed} | {before:.4g} | {se3_ate:.4g} | {after:.4g} | {before / after:.0f}× "
             f"| {se3_ate / after:.1f}× | {corrected.result.summary.total_time:.3f}"
         )
         table.add(row + (_against_gtsam(graph) if gtsam else ""))
@@ -70,7 +70,7 @@ def run(
                 ("ground truth", sequence.truth.translation),
             ]
             plot_trajectories(
-                curves, plot, title=f"drift {drift:.1%}/keyframe, seed {seed}", view="top"
+                curves, plot, title=f"drift {_percent(drift)}/keyframe, seed {seed}", view="top"
             )
     return str(table)
 
@@ -113,11 +113,16 @@ def run_false_loops(
         summary = robust.result.summary
         false_rejected, true_rejected = rejection_rates(corrupted, false, summary.rejected_edges)
         table.add(
-            f"{drift:.1%} | {seed} | {false.sum()} | {sequence.ate(clean.poses):.4g} "
+            f"{_percent(drift)} | {seed} | {false.sum()} | {sequence.ate(clean.poses):.4g} "
             f"| {sequence.ate(plain.poses):.4g} | {sequence.ate(robust.poses):.4g} "
             f"| {false_rejected:.1%} | {true_rejected:.1%} | {summary.total_time:.2f}"
         )
     return str(table)
+
+
+def _percent(drift: float) -> str:
+    """A drift rate per keyframe as a percentage, to its significant digits (0.05%, not 0.1%)."""
+    return f"{100 * drift:g}%"
 
 
 def _sequences(
