@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 from posegraph.doctor import Diagnosis
 from posegraph.evaluation import Evaluation
 from posegraph.graph import PoseGraph
-from posegraph.solvers import Summary
+from posegraph.solvers import MAX_ITERATIONS, Summary
 
 if TYPE_CHECKING:
     from posegraph.scale_drift import ScaleDriftCorrection
@@ -71,9 +71,11 @@ def _initialisation_line(summary: Summary) -> str:
 
 
 def _termination_line(summary: Summary) -> str:
-    return (
-        f"  termination     {summary.termination}{'' if summary.converged else ' (not converged)'}"
-    )
+    """How the run ended; a run stopped by the iteration limit says how to raise it."""
+    remark = "" if summary.converged else " (not converged)"
+    if summary.termination == MAX_ITERATIONS:
+        remark = " (not converged; --max-iterations raises the limit)"
+    return f"  termination     {summary.termination}{remark}"
 
 
 def _robust_lines(

@@ -265,6 +265,8 @@ def test_optimize_options(tmp_path):
     assert document["summary"]["num_variables"] == (400 - 2) * 3
     limited = run("optimize", EXAMPLE, "--max-iterations", "1", "--json", check_exit=1)
     assert json.loads(limited.stdout)["summary"]["termination"] == "maximum iterations reached"
+    report = run("optimize", EXAMPLE, "--max-iterations", "1", check_exit=1).stdout
+    assert "(not converged; --max-iterations raises the limit)" in report
     unknown = run("optimize", EXAMPLE, "--fix", "99999", check_exit=2)
     assert unknown.stderr.count("\n") == 1 and "node 99999" in unknown.stderr
 

@@ -1,10 +1,11 @@
 """Nonlinear least-squares solvers: Gauss-Newton and Levenberg-Marquardt."""
 
-from .optimize import STOPPED, TIME_LIMIT, Callback, optimize
+from .optimize import MAX_ITERATIONS, STOPPED, TIME_LIMIT, Callback, optimize
 from .options import SolverOptions
 from .summary import IterationRecord, Result, Summary
 
 __all__ = [
+    "MAX_ITERATIONS",
     "STOPPED",
     "TIME_LIMIT",
     "Callback",

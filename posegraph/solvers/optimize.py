@@ -46,6 +46,7 @@ Callback = Callable[[IterationRecord], bool | None]
 """Called after every iteration; returning True stops the run (termination ``STOPPED``)."""
 STOPPED = "stopped by callback"
 TIME_LIMIT = "time limit reached"
+MAX_ITERATIONS = "maximum iterations reached"
 NOT_FINITE = "the error at the start is not finite (values or residuals beyond double precision)"
 
 _PHASES = ("linearize", "assemble", "factorize", "solve", "other")
@@ -196,7 +197,7 @@ def optimize(
     elif not np.isfinite(initial_error):
         termination, converged = NOT_FINITE, False
     elif options.max_iterations == 0:
-        termination, converged = "maximum iterations reached", False
+        termination, converged = MAX_ITERATIONS, False
     else:
         current, termination, converged = _iterate(
             graph, options, callback, system, weighting, clock, current, history
@@ -234,7 +235,7 @@ def _assemble(graph, system, current, clock):
 def _iterate(graph, options, callback, system, weighting, clock, current, history):
     """The iterations of ``optimize``; returns (final linearisation, termination, converged).
     ``history`` receives a record per iteration."""
-    termination, converged = "maximum iterations reached", False
+    termination, converged = MAX_ITERATIONS, False
     data, gradient, diagonal = _assemble(graph, system, current, clock)
     lm = options.method == "lm"
     initial = options.initial_damping
