@@ -73,15 +73,16 @@ nonlinearity (s 4562 without it, against 10307 before, on intel)."""
 STAGE_ITERATIONS = 10
 STAGE_RELATIVE_DECREASE = 1e-5
 INITIAL_DAMPING = 1e-10
-"""Levenberg-Marquardt's initial λ in GNC's solves from values it reached, unless the options
-set one. GNC's decisions depend on where its stages' few iterations end, and the search was
-validated with this value: with least squares' 1e-12 (``solvers.options.DEFAULT_INITIAL_DAMPING``),
-six of its scenario tests took other paths (a fitted false loop kept, true loops of a drifted
-region or of a monocular sequence rejected). The consistency pass's solves from the chordal
-relaxation start where least squares would. From there λ = 1e-10 led Levenberg-Marquardt into
-a valley on monocular sequences at 2.4–2.5% drift, with every false loop rejected: it crawled
-for 100 iterations (1e-12: 11) and GNC ended in another basin, at 5.0–7.1 m ATE against the
-1.8–2.2 m of least squares without the false loops."""
+"""Levenberg-Marquardt's initial λ in GNC's solves, unless the options set one, but for the
+consistency pass's solve from the chordal relaxation of the kept edges: a fresh start, which
+takes least squares' λ (``solvers.options.DEFAULT_INITIAL_DAMPING``, 1e-12). GNC's decisions
+depend on where its stages' few iterations end, and the search was validated with this value:
+with 1e-12 throughout, six of its scenario tests took other paths (a fitted false loop kept,
+true loops of a drifted region or of a monocular sequence rejected). The fresh start with
+1e-10, on monocular sequences at 2.4–2.5% drift with every false loop rejected, led
+Levenberg-Marquardt into a valley that it crawled along for 100 iterations (1e-12: 11), and
+GNC ended in another basin, at 5.0–7.1 m ATE against the 1.8–2.2 m of least squares without
+the false loops."""
 
 
 @dataclasses.dataclass(frozen=True)

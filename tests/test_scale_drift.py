@@ -340,7 +340,7 @@ def test_gnc_rejects_false_sim3_loops_of_a_monocular_sequence(
 @pytest.mark.parametrize("drift, seed", [(0.024, 0), (0.025, 1)])
 def test_gnc_ends_at_the_correction_without_the_false_loops_from_a_fresh_start(drift, seed):
     """30% false loops heard by the default lift: GNC rejects exactly them, and its consistency
-    pass solves the true loops from their chordal relaxation. Started at GNC's own λ = 1e-10,
+    pass solves the true edges from their chordal relaxation. Started at GNC's own λ = 1e-10,
     Levenberg-Marquardt crawled along a valley from there for 100 iterations, and GNC ended in
     another basin (ATE 5.3 and 5.0 m, against 1.8 and 2.2 m without the false loops; measured).
     Started as least squares starts, it ends at the correction without the false loops: no
