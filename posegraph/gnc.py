@@ -302,15 +302,14 @@ def _settle(graph, mask, kept, values, width_sq, options, run: _Run, restart: bo
     repeat until the kept set no longer changes. Returns (kept, result). With ``restart``
     (SE2, SE3, Sim3) the first solve starts from the chordal relaxation of the kept edges, which
     escapes a basin that an early, outlier-distorted GNC stage may have led into. That solve is
-    a fresh start: it takes the caller's initial λ (``run.options``: least squares' default
-    unless they set one), not ``INITIAL_DAMPING``."""
+    a fresh start, made with the caller's options (``run.options``): least squares' initial λ
+    unless they set one, not ``INITIAL_DAMPING``."""
     result = None
     for settle_pass in range(MAX_CONSISTENCY_PASSES):
         work = graph.with_edges(kept)
         if settle_pass == 0 and restart and supports_chordal(graph.group):
             work.set_values(initialize(work, "chordal"))
-            fresh = dataclasses.replace(options, initial_damping=run.options.initial_damping)
-            result = run.solve(work, fresh, "consistency (chordal)")
+            result = run.solve(work, run.options, "consistency (chordal)")
         else:
             work.set_values(values)
             result = run.solve(work, options, "consistency")
