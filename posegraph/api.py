@@ -373,12 +373,10 @@ def _initialize_new_nodes(graph: PoseGraph, options: SolverOptions) -> None:
     local.fixed = solved
     local.priors = local.priors.subset(~solved[local.priors.i])
     local.set_values(align_to_priors(local, spanning_tree_values(local, known=solved)))
-    # The local problem is small: SuperLU's start-up is cheaper than CHOLMOD's.
     local_options = dataclasses.replace(
         options,
         relative_decrease=LOCAL_RELATIVE_DECREASE,
         max_iterations=min(options.max_iterations, LOCAL_MAX_ITERATIONS),
-        linear_solver="scipy",
     )
     refined = solve(local, local_options)
     graph.set_values(graph.values.set_at(np.flatnonzero(new), refined.values[~solved]))
