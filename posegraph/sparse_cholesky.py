@@ -246,6 +246,7 @@ class ScipyCholesky:
         return scipy.sparse.csc_matrix((data, indices, indptr), shape=(self._size, self._size))
 
     def _fix_ordering(self, order: np.ndarray) -> None:
+        """Factorise A[order][:, order] from now on: its column k is A's column ``order[k]``."""
         entries = np.arange(1, self._indices.size + 1, dtype=float)
         permuted = self._matrix(entries, self._indices, self._indptr)[order][:, order].tocsc()
         permuted.sort_indices()
@@ -257,10 +258,11 @@ class ScipyCholesky:
         try:
             if self._order is None:
                 matrix = self._matrix(data, self._indices, self._indptr)
-                ordering = scipy.sparse.linalg.splu(
+                # SuperLU's perm_c sends A's column j to position perm_c[j].
+                position = scipy.sparse.linalg.splu(
                     matrix, permc_spec="MMD_AT_PLUS_A", **self._OPTIONS
                 ).perm_c
-                self._fix_ordering(ordering)
+                self._fix_ordering(np.argsort(position))
             permuted = data[self._gather]
             matrix = self._matrix(permuted, self._permuted_indices, self._permuted_indptr)
             self._lu = scipy.sparse.linalg.splu(matrix, permc_spec="NATURAL", **self._OPTIONS)

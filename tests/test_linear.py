@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import scipy.sparse
+import scipy.sparse.linalg
 from posegraph_datasets.generators import docked, sphere
 
 from posegraph.factors import linearize_between, linearize_priors
@@ -142,6 +143,27 @@ def test_cvxopt_pattern_holds_each_entry_once_in_column_order(long_columns):
     np.testing.assert_array_equal(indptr, matrix.indptr)
     np.testing.assert_array_equal(indices, matrix.indices)
     np.testing.assert_array_equal(values, 1.0)
+
+
+def test_superlu_keeps_the_fill_of_its_first_minimum_degree_ordering():
+    """The SuperLU backend orders the columns once (minimum degree, at its first factorisation)
+    and then factorises the matrix permuted by that ordering: its factor holds no more entries
+    than SuperLU's own minimum-degree factorisation of the same matrix. Permuted by the inverse
+    ordering instead, a 10 × 20 sphere's factor held 4.1× as many, and intel's 25×."""
+    graph = sphere(10, 20, seed=3)[0]
+    system = NormalEquations(graph, graph.gauge_nodes(), "scipy")
+    lin = linearize_between(graph.values, graph.edges)
+    prior_lin = linearize_priors(graph.values, graph.priors)
+    data, _ = system.assemble(lin, graph.edges.information, prior_lin, graph.priors.information)
+    for _ in range(2):  # the first factorisation chooses the ordering, the second reuses it
+        system.factorize(data)
+        reference = scipy.sparse.linalg.splu(
+            system.matrix(data),
+            permc_spec="MMD_AT_PLUS_A",
+            diag_pivot_thresh=0.0,
+            options={"SymmetricMode": True},
+        )
+        assert system.cholesky._lu.L.nnz <= reference.L.nnz
 
 
 @pytest.mark.parametrize("backend", available_backends())
