@@ -230,7 +230,8 @@ class CholmodCholesky:
 
 class ScipyCholesky:
     """SuperLU (symmetric mode, no pivoting). The first factorisation chooses a minimum-degree
-    ordering; later ones factorise the matrix permuted by it, with no ordering work."""
+    ordering, and its factor serves; later ones factorise the matrix permuted by that ordering,
+    with no ordering work."""
 
     name = "scipy"
     inverts_selectively = False
@@ -241,6 +242,8 @@ class ScipyCholesky:
         self._order: np.ndarray | None = None
         self._gather = self._permuted_indices = self._permuted_indptr = None
         self._lu = None
+        self._factors_permuted = False
+        """Whether ``_lu`` factorises A[order][:, order] (else A, with its own ordering)."""
 
     def _matrix(self, data, indices, indptr) -> scipy.sparse.csc_matrix:
         return scipy.sparse.csc_matrix((data, indices, indptr), shape=(self._size, self._size))
@@ -258,29 +261,33 @@ class ScipyCholesky:
         try:
             if self._order is None:
                 matrix = self._matrix(data, self._indices, self._indptr)
+                lu = scipy.sparse.linalg.splu(matrix, permc_spec="MMD_AT_PLUS_A", **self._OPTIONS)
                 # SuperLU's perm_c sends A's column j to position perm_c[j].
-                position = scipy.sparse.linalg.splu(
-                    matrix, permc_spec="MMD_AT_PLUS_A", **self._OPTIONS
-                ).perm_c
-                self._fix_ordering(np.argsort(position))
-            permuted = data[self._gather]
-            matrix = self._matrix(permuted, self._permuted_indices, self._permuted_indptr)
-            self._lu = scipy.sparse.linalg.splu(matrix, permc_spec="NATURAL", **self._OPTIONS)
+                self._fix_ordering(np.argsort(lu.perm_c))
+                self._factors_permuted = False
+            else:
+                permuted = data[self._gather]
+                matrix = self._matrix(permuted, self._permuted_indices, self._permuted_indptr)
+                lu = scipy.sparse.linalg.splu(matrix, permc_spec="NATURAL", **self._OPTIONS)
+                self._factors_permuted = True
         except RuntimeError as error:
             raise NotPositiveDefinite(str(error)) from None
-        if np.any(self._lu.U.diagonal() <= 0):
+        self._lu = lu
+        if np.any(lu.U.diagonal() <= 0):
             raise NotPositiveDefinite("non-positive pivot")
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
+        if not self._factors_permuted:
+            return self._lu.solve(rhs)
         x = np.empty_like(rhs)
         x[self._order] = self._lu.solve(rhs[self._order])
         return x
 
     def pivots(self) -> np.ndarray:
-        """Per column, its pivot in the last factorisation (``pivots``): U's diagonal, in the
-        fixed ordering."""
+        """Per column, its pivot in the last factorisation (``pivots``): U's diagonal, whose
+        entry k is that of the column the ordering puts k-th (either factor)."""
         pivots = np.empty(self._size)
-        pivots[self._order] = self._lu.U.diagonal()[self._lu.perm_c]
+        pivots[self._order] = self._lu.U.diagonal()
         return pivots
 
     def covariance_blocks(self, groups: np.ndarray) -> np.ndarray:
