@@ -344,7 +344,7 @@ def test_gnc_ends_at_the_correction_without_the_false_loops_from_a_fresh_start(d
     Levenberg-Marquardt crawled along a valley from there for 100 iterations, and GNC ended in
     another basin (ATE 5.3 and 5.0 m, against 1.8 and 2.2 m without the false loops; measured).
     Started as least squares starts, it ends at the correction without the false loops: no
-    higher least-squares cost over the true loops, and the same ATE."""
+    higher least-squares cost over the true edges, and the same ATE."""
     sequence = monocular_sequence(drift=drift, seed=seed)
     corrupted, false = sequence.sim3_graph_with_false_loops(0.3, seed=seed)
     without = corrupted.with_edges(~false)
