@@ -154,18 +154,15 @@ class BlockPattern:
         added = new_keys[old_keys[found] != new_keys] if old_keys.size else new_keys
         inserted_at = np.searchsorted(old_keys, added)
         block_keys = np.insert(old_keys, inserted_at, added)
-        shift = np.searchsorted(inserted_at, np.arange(old_keys.size), side="right")
-
-        def moved(blocks: np.ndarray) -> np.ndarray:
-            return np.where(blocks >= 0, blocks + shift[blocks], -1)
-
-        def located(blocks: np.ndarray) -> np.ndarray:
-            return np.where(blocks >= 0, np.searchsorted(block_keys, new_keys[blocks]), -1)
-
+        old_index = np.arange(old_keys.size)
+        moved = old_index + np.searchsorted(inserted_at, old_index, side="right")
+        located = np.searchsorted(block_keys, new_keys)
         edge_blocks = np.concatenate(
-            [moved(previous._edge_blocks), located(new_edge_blocks)], axis=1
+            [_mapped(previous._edge_blocks, moved), _mapped(new_edge_blocks, located)], axis=1
         )
-        prior_blocks = np.concatenate([moved(previous._prior_blocks), located(new_prior_blocks)])
+        prior_blocks = np.concatenate(
+            [_mapped(previous._prior_blocks, moved), _mapped(new_prior_blocks, located)]
+        )
         return block_keys, edge_blocks, prior_blocks
 
     def _layout(self, block_keys: np.ndarray) -> np.ndarray:
@@ -278,6 +275,15 @@ class BlockPattern:
     def matrix(self, data: np.ndarray) -> scipy.sparse.csc_matrix:
         """The matrix as scipy CSC (for inspection and tests)."""
         return scipy.sparse.csc_matrix((data, self.indices, self.indptr), (self.size, self.size))
+
+
+def _mapped(blocks: np.ndarray, index: np.ndarray) -> np.ndarray:
+    """``index[blocks]`` where a block is located, −1 where it is held (−1), even when
+    ``index`` is empty (every node held)."""
+    located = np.full_like(blocks, -1)
+    kept = blocks >= 0
+    located[kept] = index[blocks[kept]]
+    return located
 
 
 def _pairs_within(groups: np.ndarray | None) -> np.ndarray:

@@ -243,7 +243,8 @@ def test_edges_are_removed_by_index_or_mask_and_counts_must_agree():
 def test_graphs_with_nothing_to_optimise(group):
     """An empty graph, and graphs whose every node is held, end at once with every
     initialisation and robust mode (the empty one raised IndexError in the spanning tree and
-    chordal's solve)."""
+    chordal's solve), also when one grows by a prior after a solve (IndexError in the growth of
+    its empty sparsity pattern)."""
     held = PoseGraph(group)
     held.add_nodes([0, 1], group.identity((2,)))
     held.add_edge(0, 1, group.exp(np.full(group.dof, 0.1)), np.eye(group.dof))
@@ -258,6 +259,10 @@ def test_graphs_with_nothing_to_optimise(group):
             assert posegraph.optimize(graph.copy(), robust=robust).summary.converged
     result = posegraph.optimize(held)
     assert result.summary.final_error == pytest.approx(0.5 * 0.1**2 * group.dof)
+    held.add_prior(0, group.exp(np.full(group.dof, 0.2)), np.eye(group.dof))
+    grown = posegraph.optimize(held).summary
+    assert "sparsity pattern (grown)" in grown.reused
+    assert grown.final_error == pytest.approx(0.5 * (0.1**2 + 0.2**2) * group.dof)
     assert posegraph.marginals(PoseGraph(group), []).shape == (0, group.dof, group.dof)
 
 

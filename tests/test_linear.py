@@ -218,6 +218,25 @@ def test_a_grown_pattern_equals_one_built_afresh(backend, old_to_old):
     _assert_matches_dense(system, grown, held, 0.0)
 
 
+@pytest.mark.parametrize("held", [[0, 1, 2, 3], [0, 1]], ids=["every-node-held", "two-held"])
+def test_a_pattern_grows_by_edges_and_priors_between_held_nodes(held):
+    """Blocks of held nodes (index −1) are kept out of the merge, even when no node is free
+    and the old and new block lists are empty."""
+    graph = random_graph(POSE_GROUPS[0], 4, 0, seed=11)
+    graph.add_prior(graph.node_ids[0], graph.values[0], np.eye(3))
+    held = np.array(held)
+    previous = NormalEquations(graph, held)
+    grown = graph.copy()
+    grown.add_edge(graph.node_ids[0], graph.node_ids[1], graph.values[1], np.eye(3))
+    grown.add_prior(graph.node_ids[1], graph.values[1], np.eye(3))
+    system = NormalEquations(grown, held, previous=previous)
+    assert system.grown
+    fresh = NormalEquations(grown, held)
+    for name in ("indptr", "indices", "diagonal_positions"):
+        np.testing.assert_array_equal(getattr(system, name), getattr(fresh, name))
+    _assert_matches_dense(system, grown, held, 0.0)
+
+
 def test_a_pattern_is_rebuilt_when_the_graph_did_not_only_grow():
     graph = random_graph(POSE_GROUPS[0], 12, 6, seed=10)
     held = np.array([0])
