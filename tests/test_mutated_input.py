@@ -1,7 +1,8 @@
 """Small valid files of every tag, mutated at random (a token replaced, dropped or inserted, a line
 duplicated or deleted, a tag swapped): whatever the damage, reading either succeeds or raises a
-``GraphFileError`` that names the file and a line it has, lenient reading skips the line strict
-reading stopped at, and a graph that reads cleanly optimises or is refused with a ValueError."""
+``GraphFileError`` on one line that names the file and, unless the fault is the whole file's
+(nothing readable, say), a line it has; lenient reading skips the line strict reading stopped at,
+and a graph that reads cleanly optimises or is refused with a ValueError."""
 
 from __future__ import annotations
 
