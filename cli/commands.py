@@ -18,6 +18,7 @@ from posegraph.conversion import load_trajectory, output_format, unwritable_to
 from posegraph.doctor import diagnose
 from posegraph.evaluation import evaluate
 from posegraph.io import ReadOptions, ReadResult, read_graph
+from posegraph.io.atomic import check_replaceable
 from posegraph.io.covariances import write_covariances
 from posegraph.lie import LieGroup
 from posegraph.solvers import SolverOptions, Summary
@@ -98,8 +99,8 @@ def _check_output(
     path: str | None, to: str | None = None, figure: bool = False, text: bool = False
 ) -> None:
     """Fail before any work if ``path`` cannot be written: a format not known by its suffix
-    (or ``to``; a ``figure``'s by matplotlib; ``text`` has one format), or a folder that does
-    not exist."""
+    (or ``to``; a ``figure``'s by matplotlib; ``text`` has one format), a folder that does
+    not exist, or a read-only file."""
     if path is None:
         return
     if figure:
@@ -113,6 +114,7 @@ def _check_output(
         raise UsageError(f"{path}: cannot write: there is no folder {folder}")
     if os.path.isdir(path):
         raise UsageError(f"{path}: is a folder, not a file")
+    check_replaceable(path)
 
 
 def _check_writable(

@@ -227,13 +227,25 @@ def test_progress_is_shown_on_a_terminal(tmp_path, command, robust):
 
 
 def test_optimize_refuses_to_overwrite_its_input(tmp_path):
+    """Unless --overwrite is given; and not even then when the file is read-only (the atomic
+    write's rename would replace it regardless, for root whatever its mode)."""
     source = tmp_path / "graph.g2o"
     shutil.copy(EXAMPLE, source)
     before = source.read_text()
     refused = run("optimize", source, "-o", source, check_exit=2)
     assert "refusing to overwrite" in refused.stderr and source.read_text() == before
     run("optimize", source, "-o", source, "--overwrite")
-    assert source.read_text() != before
+    optimised = source.read_text()
+    assert optimised != before
+    source.chmod(0o444)
+    refused = run(
+        "optimize", source, "-o", source, "--overwrite", "--init", "odometry", check_exit=2
+    )
+    assert (
+        refused.stderr.count("\n") == 1
+        and f"{source}: cannot write: the file is read-only" in refused.stderr
+    )
+    assert refused.stdout == "" and source.read_text() == optimised  # refused before any work
 
 
 def test_outputs_are_checked_before_any_work(tmp_path):

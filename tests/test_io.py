@@ -468,7 +468,8 @@ def test_writes_are_atomic_and_leave_no_temporary_files(tmp_path):
 
 def test_written_files_get_the_usual_permissions_and_errors_name_the_target(tmp_path):
     """``mkstemp`` makes owner-only files; the output gets the umask's mode when new and keeps
-    its mode when replaced. A failure names the file asked for, not the temporary."""
+    its mode when replaced; a read-only one is not replaced. A failure names the file asked
+    for, not the temporary."""
     graph = random_graph(SE2, 4, 1, seed=41)
     umask = os.umask(0o022)
     try:
@@ -485,6 +486,12 @@ def test_written_files_get_the_usual_permissions_and_errors_name_the_target(tmp_
     with pytest.raises(OSError) as raised:
         write_graph(graph, str(missing))
     assert raised.value.filename == str(missing)
+    written = kept.read_text()
+    kept.chmod(0o444)  # read-only: refused, for root too, though the rename would succeed
+    with pytest.raises(PermissionError, match="read-only") as raised:
+        write_graph(random_graph(SE2, 4, 1, seed=42), str(kept))
+    assert raised.value.filename == str(kept) and kept.read_text() == written
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["kept.g2o", "new.g2o"]
 
 
 def test_reading_sphere2500_is_fast_enough_to_matter(shared_dataset):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import os
 import stat
 import tempfile
@@ -21,13 +22,29 @@ def _file_mode(target: Path) -> int:
         return 0o666 & ~umask
 
 
+def check_replaceable(path: str | os.PathLike) -> None:
+    """Raise ``PermissionError`` naming ``path`` if it is a file that may not be written:
+    ``open`` would refuse it (``os.access``), or none of its write bits is set, which only
+    root's ``open`` ignores. An atomic write's rename would replace it regardless of either."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:  # no such file (or a path the write itself will report)
+        return
+    if not os.access(path, os.W_OK) or not mode & 0o222:
+        raise PermissionError(
+            errno.EACCES, "cannot write: the file is read-only (chmod u+w allows it)", str(path)
+        )
+
+
 @contextmanager
 def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     """A temporary path beside ``path`` (same suffix, so writers that go by it still can) to
     write to; renamed over ``path`` when the block ends, removed if it raises. Readers see the
-    old file or the new one, never half. The file gets ``path``'s permissions (``_file_mode``).
-    An ``OSError`` names ``path``, not the temporary."""
+    old file or the new one, never half. The file gets ``path``'s permissions (``_file_mode``);
+    a read-only file is not replaced (``check_replaceable``). An ``OSError`` names ``path``, not
+    the temporary."""
     target = Path(path)
+    check_replaceable(target)
 
     def failed(error: OSError) -> OSError:
         return OSError(error.errno, f"cannot write: {error.strerror}", str(target))
