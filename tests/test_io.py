@@ -188,6 +188,22 @@ def test_toro_round_trip(group, tmp_path):
     _assert_same_graph(second, first.graph, atol=ROUND_TRIP_ATOL[group])
 
 
+@pytest.mark.parametrize("name", ["out.g2o", "out.graph"])
+def test_negative_node_ids_are_not_written_to_graph_files(name, tmp_path):
+    """A graph's ids may be negative; the files hold 0 to 2⁶³ − 1, the ids the reader takes,
+    so the writer refuses rather than write a file that nothing reads back."""
+    graph = random_graph(SE2, 4, 1, seed=43)
+    graph.add_node(-3, SE2.identity())
+    graph.add_edge(graph.node_ids[0], -3, SE2.identity(), np.eye(3))
+    with pytest.raises(ValueError, match="hold node ids 0 to 2⁶³ − 1, not -3"):
+        write_graph(graph, str(tmp_path / name))
+    assert list(tmp_path.iterdir()) == []
+    graph.remove_edges([graph.num_edges - 1])
+    kept = graph.subgraph(graph.node_ids >= 0)
+    write_graph(kept, str(tmp_path / name))
+    assert read_graph(str(tmp_path / name)).graph.num_nodes == 4
+
+
 def test_fix_lines_are_honoured(tmp_path):
     graph = random_graph(SE2, 10, 6, seed=35, noise=0.2)
     path = tmp_path / "fix.g2o"

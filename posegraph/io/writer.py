@@ -136,8 +136,14 @@ def unwritable(
     graph: PoseGraph, file_format: str, group: type[LieGroup] | None = None
 ) -> str | None:
     """Why ``file_format`` ("g2o" or "toro") cannot hold ``graph``, or the graph lifted to
-    ``group``; None if it can. TORO has no Sim3, prior or FIX lines; g2o has no Sim3 prior."""
+    ``group``; None if it can. Both hold node ids 0 to 2⁶³ − 1 (as the reader takes them),
+    while a graph's ids may be negative. TORO has no Sim3, prior or FIX lines; g2o has no Sim3
+    prior."""
     group = graph.group if group is None else group
+    negative = graph.node_ids[graph.node_ids < 0]
+    if negative.size:
+        name = "g2o" if file_format == "g2o" else "TORO"
+        return f"{name} files hold node ids 0 to 2⁶³ − 1, not {negative[0]}"
     if file_format == "toro" and group is Sim3:
         return "TORO has no Sim3 lines; write g2o instead"
     if file_format == "toro" and (len(graph.priors) or graph.fixed.any()):
