@@ -58,9 +58,9 @@ def _apply(graph: PoseGraph, step: tuple, rng: np.random.Generator) -> None:
     elif kind == "remove" and graph.num_edges:
         graph.remove_edges([min(int(step[1] * graph.num_edges), graph.num_edges - 1)])
     elif kind == "optimize":
-        fresh = graph.copy()
+        fresh = graph.copy() if step[1] is None else None  # before the warm call changes it
         warm = posegraph.optimize(graph, robust=step[1]).summary
-        if step[1] is None:
+        if fresh is not None:
             scratch = posegraph.optimize(fresh).summary
             limit = scratch.final_error * (1 + WARM_TOLERANCE) + 1e-9
             assert warm.final_error <= limit, (warm.initialization, scratch.final_error)
