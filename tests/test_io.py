@@ -13,6 +13,14 @@ import pytest
 from posegraph.factors import chi2
 from posegraph.graph import PoseGraph
 from posegraph.io import GraphFileError, ReadOptions, read_graph, write_graph
+from posegraph.io.parsing import (
+    LineChecker,
+    _rows_from_tokens,
+    _uniform_numbers,
+    read_tagged_lines,
+    to_rows,
+)
+from posegraph.io.reader import ALL_TAGS
 from posegraph.lie import SE2, SE3, Sim3
 from posegraph.solvers import optimize
 from posegraph.trajectory_io import Trajectory, as_se3, write_trajectory
@@ -542,3 +550,63 @@ def test_reading_and_writing_leave_the_garbage_collector_as_they_found_it(tmp_pa
         assert gc.isenabled() == enabled
     finally:
         gc.enable()
+
+
+def _rows_both_ways(path):
+    """Each tag's rows of a file, parsed whole (``to_rows``) and line by line
+    (``_rows_from_tokens``), and whether ``to_rows`` could parse the tag's lines whole."""
+    by_tag: dict[str, list] = {}
+    for number, tag, text in read_tagged_lines(str(path)):
+        by_tag.setdefault(tag, []).append((number, text))
+    for tag, entries in by_tag.items():
+        spec = ALL_TAGS[tag]
+        checker = LineChecker(str(path), lenient=True)
+        whole = to_rows(tag, entries, spec.widths, spec.id_columns, checker)
+        tokens = [(number, text.split()) for number, text in entries]
+        by_line = _rows_from_tokens(
+            tag, tokens, spec.widths, spec.id_columns, LineChecker(str(path), True), frozenset()
+        )
+        whole_tag = _uniform_numbers(entries, spec.widths, len(spec.id_columns)) is not None
+        yield tag, whole, by_line, whole_tag
+
+
+@pytest.mark.parametrize(
+    "name", ["w10000.graph", "sphere2500.txt", "Klaus3.g2o", "pose3example-offdiagonal.txt"]
+)
+def test_whole_tag_parsing_reads_what_line_by_line_parsing_reads(gtsam_dataset, name):
+    """``to_rows`` parses a tag's lines in one call of numpy's C reader and falls back to
+    parsing them line by line. On real files both give the same numbers, bit for bit."""
+    for tag, whole, by_line, whole_tag in _rows_both_ways(gtsam_dataset(name)):
+        assert whole_tag or not ALL_TAGS[tag].widths, tag  # FIX lines, of any length: by line
+        np.testing.assert_array_equal(whole.line_numbers, by_line.line_numbers)
+        np.testing.assert_array_equal(whole.numbers, by_line.numbers)
+        np.testing.assert_array_equal(whole.node_ids, by_line.node_ids)
+
+
+def test_unusual_numbers_read_the_same_both_ways(tmp_path):
+    """Tabs, runs of spaces, a no-break space, exponents, signs, infinities, a comment after the
+    numbers, ids near 2⁵³ (still exact), an id of 2⁵³ + 1 (parsed exactly, line by line), and
+    tokens that Python's ``float`` reads but numpy's C reader does not ("1_0", Arabic-Indic
+    digits): the whole-tag reading declines those, and both ways agree on every line."""
+    path = tmp_path / "unusual.g2o"
+    path.write_text(
+        "VERTEX_SE2\t0\t1e-3  -2.5E+2 +.5\n"
+        "VERTEX_SE2 9007199254740991 1\u00a02 3 # comment\n"
+        "VERTEX_SE2 2 -0 0.0 inf\n"
+        "VERTEX_SE3:QUAT 7 1_0 ٣ 0 0 0 0 1\n"
+        "VERTEX_SE3:QUAT 9007199254740993 0 0 0 0 0 0 1\n"
+        "VERTEX_SE3:QUAT 8 -1e308 1e-320 0 0 0 0 1\n"
+    )
+    parsed = {tag: rows for tag, *rows in _rows_both_ways(path)}
+    assert [whole_tag for *_, whole_tag in parsed.values()] == [True, False]
+    for whole, by_line, _ in parsed.values():
+        np.testing.assert_array_equal(whole.line_numbers, by_line.line_numbers)
+        np.testing.assert_array_equal(whole.numbers, by_line.numbers)
+        np.testing.assert_array_equal(whole.node_ids, by_line.node_ids)
+    se2 = parsed["VERTEX_SE2"][0]
+    np.testing.assert_array_equal(se2.line_numbers, [1, 2])  # line 3's inf is refused
+    assert se2.node_ids[:, 0].tolist() == [0, 2**53 - 1]
+    assert se2.numbers[0].tolist() == [0, 1e-3, -250.0, 0.5]
+    se3 = parsed["VERTEX_SE3:QUAT"][0]
+    assert se3.node_ids[:, 0].tolist() == [7, 2**53 + 1, 8]
+    assert se3.numbers[0, 1:3].tolist() == [10.0, 3.0]

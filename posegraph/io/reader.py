@@ -23,7 +23,7 @@ from .parsing import (
     Rows,
     paused_garbage_collection,
     quaternion_problems,
-    read_lines,
+    read_tagged_lines,
     to_rows,
 )
 from .tags import (
@@ -221,8 +221,8 @@ def _pad_missing_information(entries: list, spec: TagFormat) -> list:
     replaces every information after parsing)."""
     short, missing = spec.widths_without_information, spec.information_values
     return [
-        (number, tokens + ["0"] * missing if len(tokens) - 1 in short else tokens)
-        for number, tokens in entries
+        (number, text + " 0" * missing if len(text.split()) in short else text)
+        for number, text in entries
     ]
 
 
@@ -353,13 +353,12 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
     options = ReadOptions() if options is None else options
     checker = LineChecker(path, options.lenient)
     lines_by_tag: dict[str, list] = {}
-    for number, tokens in read_lines(path):
-        tag = tokens[0]
+    for number, tag, text in read_tagged_lines(path):
         if tag not in ALL_TAGS:
             advice = "" if options.lenient else " (--lenient skips lines it cannot read)"
             checker.fail(number, f"unknown tag {tag!r}{advice}")
             continue
-        lines_by_tag.setdefault(tag, []).append((number, tokens))
+        lines_by_tag.setdefault(tag, []).append((number, text))
     if not lines_by_tag:
         raise GraphFileError(path, None, "holds no vertices or edges (is the file empty?)")
 
