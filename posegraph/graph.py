@@ -51,6 +51,25 @@ def named_nodes(node_ids: np.ndarray, shown: int = 3) -> str:
     return f"nodes {named}" + (f", … ({len(node_ids)} nodes)" if len(node_ids) > shown else "")
 
 
+def element_problems(matrices: np.ndarray) -> tuple[np.ndarray, Callable[[int], str]]:
+    """Which of (n, m, m) finite matrices cannot be group elements, and what the k-th has: a
+    last entry other than 1 (by more than 1e-4), or a linear block of determinant ≤ 0. A Sim3
+    of scale 1e-110 has determinant 1e-330, which underflows to 0, and is refused; one of
+    scale e^300 has determinant +∞ and is accepted."""
+    corner = matrices[:, -1, -1]
+    with np.errstate(over="ignore", under="ignore"):
+        determinant = np.linalg.det(matrices[:, :-1, :-1])
+    unit_corner = np.abs(corner - 1) <= 1e-4
+    bad = ~unit_corner | ~(determinant > 0)
+
+    def why(k: int) -> str:
+        if unit_corner[k]:
+            return f"determinant {determinant[k]:.3g}"
+        return f"a last entry of {corner[k]:.3g}, not 1"
+
+    return bad, why
+
+
 def information_problems(information: np.ndarray) -> tuple[np.ndarray, Callable[[int], str]]:
     """Which of (n, d, d) information matrices are refused, and why the k-th is: not finite,
     not symmetric (|Ω − Ωᵀ| > 1e-9 max|Ω|), zero, or not positive semi-definite
@@ -379,20 +398,13 @@ class PoseGraph:
         finite = np.isfinite(given).all(axis=(1, 2))
         if not finite.all():
             raise ValueError(f"{describe(int(np.flatnonzero(~finite)[0]))} is not finite")
-        corner, linear = given[:, -1, -1], given[:, :-1, :-1]
-        with np.errstate(over="ignore"):  # a Sim3 of scale e^300 has determinant +∞: accepted
-            determinant = np.linalg.det(linear)
-        degenerate = np.flatnonzero(~(np.abs(corner - 1) <= 1e-4) | ~(determinant > 0))
-        if degenerate.size:  # refused before the projection, which needs det > 0
-            k = int(degenerate[0])
-            why = (
-                f"determinant {determinant[k]:.3g}"
-                if np.abs(corner[k] - 1) <= 1e-4
-                else f"a last entry of {corner[k]:.3g}, not 1"
-            )
+        degenerate, why = element_problems(given)
+        if degenerate.any():  # refused before the projection, which needs det > 0
+            k = int(np.flatnonzero(degenerate)[0])
             raise ValueError(
-                f"{describe(k)} is not an element of {group.__name__} (its matrix has {why})"
+                f"{describe(k)} is not an element of {group.__name__} (its matrix has {why(k)})"
             )
+        linear = given[:, :-1, :-1]
         normalized = group.from_matrix(given).normalize()
         off = np.abs(normalized.as_matrix() - given).max(axis=(1, 2))
         bad = np.flatnonzero(off > 1e-4 * np.maximum(np.abs(linear).max(axis=(1, 2)), 1))

@@ -157,4 +157,17 @@ MALFORMED = [
         "the line has no information matrix (--identity-information",
     ),
     ("not-text", b"\x89PNG\r\n\x1a\n\x00\xff\xfe", None, "is not a text file"),
+    (
+        "sim3-negative-scale",
+        "VERTEX_SIM3:EXPMAP 0 0 0 0 1 0 0 0 1\nVERTEX_SIM3:EXPMAP 1 0 0 0 1 0 0 0 -2\n",
+        2,
+        "VERTEX_SIM3:EXPMAP: the line's pose is not an element of Sim3 (its matrix has "
+        "determinant -0.125)",
+    ),
+    (
+        "sim3-scale-whose-inverse-has-determinant-zero",
+        "VERTEX_SIM3:EXPMAP 0 0 0 0 1 0 0 0 1\nVERTEX_SIM3:EXPMAP 1 0 0 0 1 0 0 0 1e120\n",
+        2,
+        "is not an element of Sim3 (its matrix has determinant 0)",
+    ),
 ]

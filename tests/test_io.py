@@ -472,10 +472,31 @@ def test_lenient_mode_skips_and_reports(tmp_path):
     with pytest.raises(GraphFileError) as raised:
         read_graph(str(nothing), ReadOptions(lenient=True))
     assert str(raised.value) == (
-        f"{nothing}: holds no vertex or edge that could be read (2 line(s) skipped: 1 × unknown"
-        " tag 'ROBOTLASER1' (first at line 2); 1 × VERTEX_SE2: expected 4 numbers after the tag,"
-        " found 3 (first at line 1))"
+        f"{nothing}: holds no vertex or edge that could be read (2 line(s) skipped: 1 × VERTEX_SE2:"
+        " expected 4 numbers after the tag, found 3 (first at line 1); 1 × unknown tag"
+        " 'ROBOTLASER1' (first at line 2))"
     )
+
+
+def test_lenient_mode_skips_sim3_lines_the_graph_would_refuse(tmp_path):
+    """A Sim3 pose of negative scale, or of a scale whose inverse's determinant underflows to 0,
+    is refused on its line (strict) or skipped (lenient), as the graph would refuse it. The
+    vertices are checked first; the skipped lines are listed in line order."""
+    path = tmp_path / "scales.g2o"
+    information = " ".join(["0"] * 28)
+    identity = "0 0 0 1 0 0 0"
+    path.write_text(
+        f"VERTEX_SIM3:EXPMAP 0 {identity} 1\n"
+        f"EDGE_SIM3:EXPMAP 0 1 {identity} -1 {information}\n"
+        f"VERTEX_SIM3:EXPMAP 1 {identity} 2\n"
+        f"VERTEX_SIM3:EXPMAP 2 {identity} 1e120\n"
+    )
+    with pytest.raises(GraphFileError) as raised:
+        read_graph(str(path))
+    assert raised.value.line == 4 and "determinant 0" in raised.value.message  # vertices first
+    result = read_graph(str(path), ReadOptions(lenient=True))
+    assert [(line, "determinant" in why) for line, why in result.skipped] == [(2, True), (4, True)]
+    assert result.graph.node_ids.tolist() == [0, 1] and result.graph.num_edges == 0
 
 
 def test_writes_are_atomic_and_leave_no_temporary_files(tmp_path):

@@ -42,9 +42,16 @@ EDGE_SE3:QUAT 2 0 -2 0 0 0 0 -0.2 0.98 {INFO_SE3}
 PARAMS_SE3OFFSET 0 0 0 0 0 0 0 1
 EDGE_SE3_PRIOR 1 0 1 0 0 0 0 0.1 0.995 {INFO_SE3}
 """,
-    "sim3.g2o": f"""VERTEX_SIM3:EXPMAP 0 0 0 0 0 0 0 0
-VERTEX_SIM3:EXPMAP 1 1 0 0 0 0 0.1 0.1
-VERTEX_SIM3:EXPMAP 2 2 0 0 0 0 0.2 0.2
+    "sim3a.g2o": f"""VERTEX_SIM3:EXPMAP 0 0 0 0 1 0 0 0 1
+VERTEX_SIM3:EXPMAP 1 0 0 0.05 0.999 -1 0 0 0.9
+VERTEX_SIM3:EXPMAP 2 0 0 0.1 0.995 -2 0.1 0 0.8
+EDGE_SIM3:EXPMAP 0 1 0 0 0.05 0.999 1 0 0 1.1 {INFO_SIM3}
+EDGE_SIM3:EXPMAP 1 2 0 0 0.05 0.999 1 0.1 0 1.1 {INFO_SIM3}
+EDGE_SIM3:EXPMAP 2 0 0 0 -0.1 0.995 2 0 0 1.2 {INFO_SIM3}
+""",
+    "sim3b.g2o": f"""VERTEX_SIM3:EXPMAP 0 0 0 0 0 0 0 0 500 500 320 240
+VERTEX_SIM3:EXPMAP 1 1 0 0 0 0 0.1 0.1 500 500 320 240
+VERTEX_SIM3:EXPMAP 2 2 0 0 0 0 0.2 0.2 500 500 320 240
 EDGE_SIM3:EXPMAP 0 1 1 0 0 0 0 0.1 0.1 {INFO_SIM3}
 EDGE_SIM3:EXPMAP 1 2 1 0 0 0 0 0.1 0.1 {INFO_SIM3}
 EDGE_SIM3:EXPMAP 2 0 -2 0 0 0 0 -0.2 -0.2 {INFO_SIM3}
@@ -95,6 +102,16 @@ def mutated_files(draw) -> tuple[str, str]:
         elif tokens:
             tokens[0] = draw(st.sampled_from(TAGS))
     return name, "".join(" ".join(tokens) + "\n" for tokens in lines)
+
+
+@pytest.mark.parametrize("name", sorted(VALID_FILES))
+def test_the_files_before_damage_read(tmp_path, name):
+    """The mutations start from files that read, with every line."""
+    path = tmp_path / name
+    path.write_text(VALID_FILES[name])
+    result = read_graph(str(path))
+    assert sum(result.tag_counts.values()) == len(VALID_FILES[name].splitlines())
+    assert result.graph.num_edges > 0
 
 
 def _read(path: str, options: ReadOptions):

@@ -7,7 +7,7 @@ from collections import Counter
 
 import numpy as np
 
-from ..graph import PoseGraph, information_problems, overflowing_edges
+from ..graph import PoseGraph, element_problems, information_problems, overflowing_edges
 from ..initialization import align_to_priors, spanning_tree_values
 from ..lie import SE3, Sim3
 from ..lifting import (
@@ -87,7 +87,7 @@ class ReadResult:
     tag_counts: dict[str, int]
     """Lines read per tag (skipped lines excluded)."""
     skipped: list[tuple[int, str]]
-    """(line, reason) of every line skipped in lenient mode."""
+    """(line, reason) of every line skipped in lenient mode, in line order."""
     nodes_without_vertex: np.ndarray
     """Ids of nodes that had no vertex line, initialised by composing odometry."""
     sim3_dialect: str | None
@@ -228,21 +228,30 @@ def _pad_missing_information(entries: list, spec: TagFormat) -> list:
 
 def _finite(rows: Rows, pieces: tuple, checker: LineChecker) -> tuple[Rows, tuple]:
     """The rows whose pieces (a group element, then information matrices) are finite, and the
-    element's inverse too, and their pieces; the others are refused: a number overflowed, or
-    underflowed (a Sim3 log-scale of ±1e20 gives a scale of ∞ or 0)."""
-    element = pieces[0]
-    finite = np.isfinite(element.as_matrix()).all(axis=(1, 2))
-    finite &= np.isfinite(element.inverse().as_matrix()).all(axis=(1, 2))
+    element's inverse too, and whose element the graph accepts (``element_problems``), and
+    their pieces; the others are refused: a number overflowed, or underflowed (a Sim3
+    log-scale of ±1e20 gives a scale of ∞ or 0, a scale of 1e120 an inverse of determinant
+    1e-360, which is 0)."""
+    matrices = pieces[0].as_matrix()
+    finite = np.isfinite(matrices).all(axis=(1, 2))
+    finite &= np.isfinite(pieces[0].inverse().as_matrix()).all(axis=(1, 2))
     for information in pieces[1:]:
         finite &= np.isfinite(information).all(axis=(1, 2))
-    if finite.all():
+    degenerate, why = element_problems(matrices)
+    keep = finite & ~degenerate
+    if keep.all():
         return rows, pieces
     rows = checker.keep_good(
         rows,
-        ~finite,
-        lambda k: "a number is out of range: the line's pose or information overflows",
+        ~keep,
+        lambda k: (
+            "a number is out of range: the line's pose or information overflows"
+            if not finite[k]
+            else f"the line's pose is not an element of {type(pieces[0]).__name__} (its "
+            f"matrix has {why(k)})"
+        ),
     )
-    return rows, tuple(piece[finite] for piece in pieces)
+    return rows, tuple(piece[keep] for piece in pieces)
 
 
 def _parse(spec: TagFormat, rows: Rows, options: ReadOptions, checker: LineChecker):
@@ -422,7 +431,7 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
         path,
         file_format,
         dict(tag_counts),
-        checker.skipped,
+        sorted(checker.skipped),
         without_vertex,
         sim3_dialect,
         lifted_scale_information,
