@@ -166,7 +166,8 @@ def test_non_finite_steps_are_rejected(monkeypatch):
 def test_steps_that_overflow_are_rejected_silently():
     """From the identity, the Gauss-Newton step lands at e^800 and e^1000 (``sim3_scale_chain``):
     GN stops, saying why; LM damps its steps and ends on values that double precision holds.
-    Neither lets numpy's warnings through."""
+    Neither lets numpy's warnings through. LM's records of the rejected steps say so with a
+    Python bool, which ``--json`` can write (a numpy bool was an internal error there)."""
     graph = sim3_scale_chain()
     with warnings.catch_warnings():
         warnings.simplefilter("error")
@@ -176,6 +177,8 @@ def test_steps_that_overflow_are_rejected_silently():
     assert gn.summary.final_error == gn.summary.initial_error
     assert np.isfinite(lm.values.as_matrix()).all()
     assert lm.summary.final_error < lm.summary.initial_error
+    rejected = [record for record in lm.summary.iterations if not record.accepted]
+    assert rejected and {type(record.accepted) for record in lm.summary.iterations} == {bool}
 
 
 def test_an_error_that_is_not_finite_at_the_start_ends_the_run_at_once():

@@ -298,7 +298,9 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
                 trial = _Linearized(graph, trial_values, weighting)
             clock.lap("linearize")
         step_norm = float(np.linalg.norm(step))
-        accepted = trial is not None and np.isfinite(trial.error) and trial.error < current.error
+        accepted = bool(
+            trial is not None and np.isfinite(trial.error) and trial.error < current.error
+        )
         decrease = current.error - trial.error if accepted else 0.0
         if accepted:
             if lm:
