@@ -18,6 +18,7 @@ import scipy.sparse.csgraph
 from .alignment import similarity_fits
 from .graph import PoseGraph, named_nodes
 from .lie import LieGroup
+from .sparse_cholesky import NotPositiveDefinite
 
 _ANCHOR_WEIGHT = 1e-9  # known values hang off the virtual root first
 _ODOMETRY_WEIGHT = 1.0
@@ -44,13 +45,23 @@ def initialize(graph: PoseGraph, method: str) -> LieGroup:
     nodes (``PoseGraph.gauge_nodes``: fixed nodes, and the lowest id of each component without a
     prior) keep their values, so that a map given away from the origin stays where it is.
     Raises ``ValueError`` naming the nodes to which the measurements compose values beyond
-    double precision (a Sim3 chain whose scales multiply past 1e308, say)."""
+    double precision (a Sim3 chain whose scales multiply past 1e308, say), or when chordal's
+    linear systems cannot be factorised even with a ridge (information of a range beyond
+    double precision)."""
     if method == "auto":
         method = choose(graph)
     if method == "file":
         return graph.values
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-        values = _composed_values(graph, method)
+        try:
+            values = _composed_values(graph, method)
+        except NotPositiveDefinite as error:
+            largest = max(np.abs(graph.edges.information).max(initial=0.0), 1.0)
+            raise ValueError(
+                f"the {method} initialisation's linear system is {error}: the information's"
+                f" range (entries up to {largest:.3g}) is beyond double precision; the"
+                " odometry initialisation composes the measurements instead"
+            ) from None
         beyond = np.flatnonzero(~np.isfinite(values.as_matrix()).all(axis=(1, 2)))
     if beyond.size:
         raise ValueError(

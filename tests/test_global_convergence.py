@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import warnings
 
 import numpy as np
@@ -92,6 +93,27 @@ def test_chordal_survives_information_of_extreme_range(group):
     following = (np.arange(6) + 1) % 6
     graph.add_edges(np.arange(6), following, truth.between(truth[following]), information)
     assert np.isfinite(chordal_values(graph).as_matrix()).all()
+
+
+def test_chordal_whose_system_no_ridge_factorises_is_refused_with_its_reason():
+    """A weight of 1e200 coupled to one of 100 by 1e120, on an edge whose translation is 1e100
+    (a damaged file's numbers): chordal's translation system cannot be factorised with any
+    ridge. ``optimize`` refuses it as a ValueError that says why and what to use instead,
+    rather than failing inside the sparse Cholesky; the odometry start still runs."""
+    graph = PoseGraph(SE2)
+    graph.add_nodes([0, 1, 2], SE2.from_xytheta(np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0]])))
+    plain = np.diag([100.0, 100.0, 1000.0])
+    extreme = np.array([[1e200, 1e120, 0], [1e120, 100, 0], [0, 0, 1000]])
+    steps = np.array([[1, 0, 0], [1, 0, 0], [-2, 1e100, 0]])
+    graph.add_edges([0, 1, 2], [1, 2, 0], SE2.from_xytheta(steps), [plain, extreme, plain])
+    message = (
+        "the chordal initialisation's linear system is not numerically positive definite, even"
+        " with a ridge of 1e-06 diag(H): the information's range (entries up to 1e+200) is"
+        " beyond double precision; the odometry initialisation composes the measurements instead"
+    )
+    with pytest.raises(ValueError, match=re.escape(message)):
+        posegraph.optimize(graph.copy())
+    assert posegraph.optimize(graph, init="odometry").summary.initialization == "odometry"
 
 
 @pytest.mark.parametrize("method", ["odometry", "spanning-tree", "chordal"])
