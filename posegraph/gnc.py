@@ -57,6 +57,7 @@ from .solvers import (
     Summary,
 )
 from .solvers import optimize as solve
+from .sparse_cholesky import NotPositiveDefinite
 
 MU_FACTOR = 1.4
 MAX_ROUNDS = 200
@@ -273,9 +274,15 @@ def _search(graph, mask, width_sq, options, run: _Run) -> tuple[np.ndarray, Resu
     for _ in range(LOCAL_SEARCH_ROUNDS):
         changed = False
         for step in (_readmit, _drop):
-            trial_kept, trial, trial_objective = step(
-                graph, mask, kept, result, objective, width_sq, options, leverage, run
-            )
+            try:
+                trial_kept, trial, trial_objective = step(
+                    graph, mask, kept, result, objective, width_sq, options, leverage, run
+                )
+            except NotPositiveDefinite:
+                # The kept edges' information cannot be factorised even with a ridge (weights
+                # of a range beyond double precision): no deleted residual or innovation can
+                # be computed, and the search ends at the best solution so far.
+                return kept, result
             if trial is not None and trial_objective < objective:
                 kept, result, objective, changed = trial_kept, trial, trial_objective, True
                 leverage = _leverage(graph, kept, result, options)

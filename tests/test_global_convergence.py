@@ -973,6 +973,21 @@ def test_a_gnc_run_reports_every_solve_and_stops_when_asked():
     assert stopped.summary.rejected_edges == np.flatnonzero(loops & (s > width_sq)).tolist()
 
 
+def test_gnc_ends_its_search_where_the_information_cannot_be_factorised():
+    """An edge whose information is indefinite at rounding level beside a diagonal entry of
+    1e-320 (a damaged file's numbers, which the information check accepts): least squares
+    converges under LM's damping, but no ridge relative to diag(H) factorises H, so GNC's
+    local search cannot compute deleted residuals. GNC ends at its solve instead of raising
+    ``NotPositiveDefinite``."""
+    graph = PoseGraph(SE2)
+    graph.add_nodes([1, 2], SE2.from_xytheta(np.array([[1.0, 0, 0], [2.0, 0, 0]])))
+    information = np.array([[100.0, 0, 0], [0, 1e-320, 1e-15], [0, 1e-15, 1e-15]])
+    graph.add_edge(1, 2, SE2.from_xytheta(np.array([1.0, 0, 0])), information)
+    result = posegraph.optimize(graph, robust="gnc")
+    assert result.summary.converged and result.summary.rejected_edges == []
+    assert result.summary.final_error == 0.0  # the values agree with the measurement
+
+
 def test_gnc_without_iterations_keeps_the_values_and_rejects_what_misfits_there():
     """``max_iterations=0`` moves nothing, as in least squares: the values are the start's
     (odometry), the loops with s > c² there are rejected, and the decisions do not stand for
