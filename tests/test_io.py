@@ -581,14 +581,26 @@ def _rows_both_ways(path):
         by_tag.setdefault(tag, []).append((number, text))
     for tag, entries in by_tag.items():
         spec = ALL_TAGS[tag]
-        checker = LineChecker(str(path), lenient=True)
-        whole = to_rows(tag, entries, spec.widths, spec.id_columns, checker)
+        whole = to_rows(
+            tag, entries, spec.widths, spec.id_columns, LineChecker(str(path), lenient=True)
+        )
         tokens = [(number, text.split()) for number, text in entries]
         by_line = _rows_from_tokens(
-            tag, tokens, spec.widths, spec.id_columns, LineChecker(str(path), True), frozenset()
+            tag,
+            tokens,
+            spec.widths,
+            spec.id_columns,
+            LineChecker(str(path), lenient=True),
+            frozenset(),
         )
         whole_tag = _uniform_numbers(entries, spec.widths, len(spec.id_columns)) is not None
         yield tag, whole, by_line, whole_tag
+
+
+def _assert_same_rows(whole, by_line) -> None:
+    np.testing.assert_array_equal(whole.line_numbers, by_line.line_numbers)
+    np.testing.assert_array_equal(whole.numbers, by_line.numbers)
+    np.testing.assert_array_equal(whole.node_ids, by_line.node_ids)
 
 
 @pytest.mark.parametrize(
@@ -599,9 +611,7 @@ def test_whole_tag_parsing_reads_what_line_by_line_parsing_reads(gtsam_dataset, 
     parsing them line by line. On real files both give the same numbers, bit for bit."""
     for tag, whole, by_line, whole_tag in _rows_both_ways(gtsam_dataset(name)):
         assert whole_tag or not ALL_TAGS[tag].widths, tag  # FIX lines, of any length: by line
-        np.testing.assert_array_equal(whole.line_numbers, by_line.line_numbers)
-        np.testing.assert_array_equal(whole.numbers, by_line.numbers)
-        np.testing.assert_array_equal(whole.node_ids, by_line.node_ids)
+        _assert_same_rows(whole, by_line)
 
 
 def test_unusual_numbers_read_the_same_both_ways(tmp_path):
@@ -621,9 +631,7 @@ def test_unusual_numbers_read_the_same_both_ways(tmp_path):
     parsed = {tag: rows for tag, *rows in _rows_both_ways(path)}
     assert [whole_tag for *_, whole_tag in parsed.values()] == [True, False]
     for whole, by_line, _ in parsed.values():
-        np.testing.assert_array_equal(whole.line_numbers, by_line.line_numbers)
-        np.testing.assert_array_equal(whole.numbers, by_line.numbers)
-        np.testing.assert_array_equal(whole.node_ids, by_line.node_ids)
+        _assert_same_rows(whole, by_line)
     se2 = parsed["VERTEX_SE2"][0]
     np.testing.assert_array_equal(se2.line_numbers, [1, 2])  # line 3's inf is refused
     assert se2.node_ids[:, 0].tolist() == [0, 2**53 - 1]
