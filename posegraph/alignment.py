@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from .lie import SE3, Sim3
+from .lie.so3 import svd_of_finite
 
 
 def umeyama(
@@ -22,13 +23,22 @@ def umeyama(
 
     With scale, a point set with no spread (σ² ≤ 1e-24 of its mean square) is refused, naming
     it by ``names``: s would be 0/0 for the source, and 0 for the target, which shrinks the
-    source onto one point and makes every error vanish.
+    source onto one point and makes every error vanish. Positions whose squares overflow
+    (beyond about 1e154) are refused too.
     """
     source, target = np.asarray(source, float), np.asarray(target, float)
     if source.shape != target.shape or source.ndim != 2 or source.shape[1] != 3:
         raise ValueError(f"need two (N, 3) point sets, got {source.shape} and {target.shape}")
     if source.shape[0] < 3:
         raise ValueError(f"need at least 3 point pairs to align, got {source.shape[0]}")
+    with np.errstate(over="ignore"):
+        squares_overflow = not np.isfinite(_mean_square(source) + _mean_square(target))
+    if squares_overflow:
+        largest = max(np.abs(source).max(), np.abs(target).max())
+        raise ValueError(
+            f"the {names[0]} and {names[1]} positions (up to {largest:.3g}) are too large to "
+            "align: their squares overflow double precision"
+        )
     if with_scale:
         for points, name in ((source, names[0]), (target, names[1])):
             if not _mean_square(points - points.mean(axis=0)) > 1e-24 * _mean_square(points):
@@ -65,7 +75,8 @@ def similarity_fits(
 
     Umeyama eqs. 34–42, weighted: with μ = Σₖ wₖ pₖ / Σₖ wₖ, the cross-covariance
     Σ = Σₖ wₖ (yₖ − μ_y)(xₖ − μ_x)ᵀ / Σₖ wₖ = U D Vᵀ and S = diag(1, …, 1, det(U)det(V)):
-    R = U S Vᵀ, s = tr(D S)/σ_x², t = μ_y − s R μ_x. Points with no spread give R = I.
+    R = U S Vᵀ, s = tr(D S)/σ_x², t = μ_y − s R μ_x. Points with no spread give R = I. A
+    group whose sums overflow (positions beyond about 1e154) gets NaN.
     """
     d = source.shape[1]
     share = weights / np.bincount(groups, weights, count)[groups]
@@ -75,16 +86,18 @@ def similarity_fits(
         sums = np.stack([np.bincount(groups, column, count) for column in columns], axis=-1)
         return sums.reshape((count,) + terms.shape[1:])
 
-    mu_x, mu_y = group_sums(share[:, None] * source), group_sums(share[:, None] * target)
-    x, y = source - mu_x[groups], target - mu_y[groups]
-    u, singular, vt = np.linalg.svd(group_sums(share[:, None, None] * y[:, :, None] * x[:, None]))
-    sign = np.ones((count, d))
-    sign[:, -1] = np.sign(np.linalg.det(u) * np.linalg.det(vt))
-    rotation = (u * sign[:, None, :]) @ vt
-    scale = np.ones(count)
-    if with_scale:
-        scale = np.sum(singular * sign, axis=1) / group_sums(share * np.sum(x * x, axis=1))
-    return rotation, mu_y - scale[:, None] * np.einsum("gij,gj->gi", rotation, mu_x), scale
+    with np.errstate(over="ignore", invalid="ignore"):  # overflow: NaN (``umeyama`` refuses it)
+        mu_x, mu_y = group_sums(share[:, None] * source), group_sums(share[:, None] * target)
+        x, y = source - mu_x[groups], target - mu_y[groups]
+        cross = group_sums(share[:, None, None] * y[:, :, None] * x[:, None])
+        u, singular, vt = svd_of_finite(cross)
+        sign = np.ones((count, d))
+        sign[:, -1] = np.sign(np.linalg.det(u) * np.linalg.det(vt))
+        rotation = (u * sign[:, None, :]) @ vt
+        scale = np.ones(count)
+        if with_scale:
+            scale = np.sum(singular * sign, axis=1) / group_sums(share * np.sum(x * x, axis=1))
+        return rotation, mu_y - scale[:, None] * np.einsum("gij,gj->gi", rotation, mu_x), scale
 
 
 def _mean_square(points: np.ndarray) -> float:

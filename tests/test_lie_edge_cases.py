@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import functools
+import subprocess
+import sys
 import warnings
 from decimal import Decimal, localcontext
 from math import factorial
@@ -157,6 +159,26 @@ def test_normalize_projects_drifted_rotations():
     )
     np.testing.assert_allclose(np.linalg.det(fixed.rotation), 1.0, atol=1e-14)
     assert_same_element(fixed, x, atol=1e-5)
+
+
+def test_projecting_a_matrix_that_holds_an_infinity_returns():
+    """numpy 2.4's SVD (OpenBLAS's LAPACK) never returns on a matrix that holds ±∞. The
+    projection skips such matrices: NaN for them and for NaN ones, the same rotation as
+    ``np.linalg.svd`` gives for the others. In a child process, so that a regression fails
+    after 60 s instead of hanging the suite."""
+    code = """
+import numpy as np
+from posegraph.lie.so3 import project_to_rotation, svd_of_finite
+matrices = np.random.default_rng(8).normal(size=(4, 3, 3))
+matrices[1, 0, 2], matrices[3, 1, 1] = np.inf, np.nan
+projected = project_to_rotation(matrices)
+assert np.isnan(projected[[1, 3]]).all()
+alone = project_to_rotation(matrices[[0, 2]])
+assert np.array_equal(projected[[0, 2]], alone)
+u, singular, vt = svd_of_finite(matrices[[0, 2]])
+assert np.allclose(u * singular[:, None, :] @ vt, matrices[[0, 2]], atol=1e-12)
+"""
+    subprocess.run([sys.executable, "-c", code], check=True, timeout=60)
 
 
 def test_project_to_rotation_2d_is_the_nearest_rotation():

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from posegraph_datasets.monocular import monocular_sequence, write_sequence
@@ -38,6 +40,20 @@ def test_umeyama_never_returns_a_reflection():
     assert np.linalg.det(umeyama(points, mirrored).rotation) > 0
     with pytest.raises(ValueError, match="at least 3"):
         umeyama(points[:2], mirrored[:2])
+
+
+@pytest.mark.parametrize("with_scale", [True, False])
+def test_umeyama_refuses_positions_whose_squares_overflow(with_scale):
+    """A position of 1e200: its square overflows. Before, the alignment without scale never
+    returned (an SVD of a matrix holding ∞), and with scale the points were said to be all at
+    one point."""
+    points = np.random.default_rng(73).normal(size=(5, 3))
+    far = points.copy()
+    far[1, 0] = 1e200
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ValueError, match=r"positions \(up to 1e\+200\) are too large to"):
+            umeyama(points, far, with_scale=with_scale)
 
 
 def test_chordal_recovers_a_noise_free_sim3_graph():

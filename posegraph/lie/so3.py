@@ -143,17 +143,32 @@ def jr_inv_matrix(phi: np.ndarray) -> np.ndarray:
     return so3_polynomial(phi, 1.0, 0.5, _coeffs.so3_jr_inv_coefficient(angle(phi)))
 
 
+def svd_of_finite(matrices: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``np.linalg.svd`` (U, σ, Vᵀ) of (…, m, m) matrices, all NaN for a matrix with an entry
+    that is not finite. LAPACK's SVD in numpy 2.4's OpenBLAS never returns on a matrix that
+    holds ±∞ (and raises on NaN), so such matrices are not passed to it."""
+    finite = np.isfinite(matrices).all(axis=(-2, -1))
+    if finite.all():
+        return np.linalg.svd(matrices)
+    u, vt = np.full(matrices.shape, np.nan), np.full(matrices.shape, np.nan)
+    singular = np.full(matrices.shape[:-1], np.nan)
+    if finite.any():
+        u[finite], singular[finite], vt[finite] = np.linalg.svd(matrices[finite])
+    return u, singular, vt
+
+
 def project_to_rotation(matrix: np.ndarray) -> np.ndarray:
     """The nearest rotation matrix (Frobenius norm) of (…, d, d) arrays: by SVD with the
     determinant fixed to +1, or for d = 2 in closed form, θ = atan2(m₁₀ − m₀₁, m₀₀ + m₁₁),
-    which maximises tr(R(θ)ᵀ M) = (m₀₀ + m₁₁) cos θ + (m₁₀ − m₀₁) sin θ."""
+    which maximises tr(R(θ)ᵀ M) = (m₀₀ + m₁₁) cos θ + (m₁₀ − m₀₁) sin θ. NaN where the matrix
+    is not finite."""
     matrix = np.asarray(matrix, float)
     if matrix.shape[-1] == 2:
         theta = np.arctan2(
             matrix[..., 1, 0] - matrix[..., 0, 1], matrix[..., 0, 0] + matrix[..., 1, 1]
         )
         return rotation_matrix_2d(theta)
-    u, _, vt = np.linalg.svd(matrix)
+    u, _, vt = svd_of_finite(matrix)
     d = np.sign(np.linalg.det(u @ vt))
     u = u.copy()
     u[..., :, -1] *= d[..., None]
