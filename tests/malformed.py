@@ -170,4 +170,10 @@ MALFORMED = [
         2,
         "is not an element of Sim3 (its matrix has determinant 0)",
     ),
+    (
+        "tum-trajectory-given-as-a-graph",
+        "0.0 1 2 3 0 0 0 1\n0.1 1 2 3 0 0 0 1\n",
+        1,
+        "unknown tag '0.0': a line of numbers, as in a TUM or KITTI trajectory, not a g2o",
+    ),
 ]

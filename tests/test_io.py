@@ -476,6 +476,15 @@ def test_lenient_mode_skips_and_reports(tmp_path):
         " expected 4 numbers after the tag, found 3 (first at line 1); 1 × unknown tag"
         " 'ROBOTLASER1' (first at line 2))"
     )
+    # Nor is a file of which every line has an unknown tag: it says so, not "is it empty?".
+    unknown = tmp_path / "unknown.g2o"
+    unknown.write_text("# a comment\nROBOTLASER1 whatever\nROBOTLASER1 1 2\n")
+    with pytest.raises(GraphFileError) as raised:
+        read_graph(str(unknown), ReadOptions(lenient=True))
+    assert str(raised.value) == (
+        f"{unknown}: holds no vertices or edges (2 line(s) skipped: 2 × unknown tag"
+        " 'ROBOTLASER1' (first at line 2))"
+    )
 
 
 def test_lenient_mode_skips_sim3_lines_the_graph_would_refuse(tmp_path):

@@ -100,21 +100,31 @@ class ReadResult:
     def skipped_by_reason(self) -> list[tuple[str, int, int]]:
         """(reason, how many lines, the first one's number) of the skipped lines, most frequent
         reason first (ties in the order of their first line)."""
-        first_line: dict[str, int] = {}
-        for line, why in self.skipped:
-            first_line.setdefault(why, line)
-        counts = Counter(why for _, why in self.skipped)
-        return [(why, count, first_line[why]) for why, count in counts.most_common()]
+        return skipped_by_reason(self.skipped)
 
     def skipped_report(self, reasons: int = 3) -> str:
         """The report "N line(s) skipped: k × reason (first at line L); …" of the skipped lines,
         naming the ``reasons`` most frequent reasons."""
-        grouped = self.skipped_by_reason()
-        named = "; ".join(
-            f"{count} × {why} (first at line {line})" for why, count, line in grouped[:reasons]
-        )
-        more = "; …" if len(grouped) > reasons else ""
-        return f"{len(self.skipped)} line(s) skipped: {named}{more}"
+        return skipped_report(self.skipped, reasons)
+
+
+def skipped_by_reason(skipped: list[tuple[int, str]]) -> list[tuple[str, int, int]]:
+    """``ReadResult.skipped_by_reason`` of (line, reason) pairs in line order."""
+    first_line: dict[str, int] = {}
+    for line, why in skipped:
+        first_line.setdefault(why, line)
+    counts = Counter(why for _, why in skipped)
+    return [(why, count, first_line[why]) for why, count in counts.most_common()]
+
+
+def skipped_report(skipped: list[tuple[int, str]], reasons: int = 3) -> str:
+    """``ReadResult.skipped_report`` of (line, reason) pairs in line order."""
+    grouped = skipped_by_reason(skipped)
+    named = "; ".join(
+        f"{count} × {why} (first at line {line})" for why, count, line in grouped[:reasons]
+    )
+    more = "; …" if len(grouped) > reasons else ""
+    return f"{len(skipped)} line(s) skipped: {named}{more}"
 
 
 @dataclasses.dataclass
@@ -364,12 +374,12 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
     lines_by_tag: dict[str, list] = {}
     for number, tag, text in read_tagged_lines(path):
         if tag not in ALL_TAGS:
-            advice = "" if options.lenient else " (--lenient skips lines it cannot read)"
-            checker.fail(number, f"unknown tag {tag!r}{advice}")
+            checker.fail(number, f"unknown tag {tag!r}{_unknown_tag_advice(tag, options)}")
             continue
         lines_by_tag.setdefault(tag, []).append((number, text))
     if not lines_by_tag:
-        raise GraphFileError(path, None, "holds no vertices or edges (is the file empty?)")
+        found = skipped_report(sorted(checker.skipped)) if checker.skipped else "is the file empty?"
+        raise GraphFileError(path, None, f"holds no vertices or edges ({found})")
 
     first_line_of_group: dict = {}
     for tag, entries in lines_by_tag.items():
@@ -441,6 +451,16 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
             path, None, f"holds no vertex or edge that could be read ({read.skipped_report()})"
         )
     return read
+
+
+def _unknown_tag_advice(tag: str, options: ReadOptions) -> str:
+    """What to add to "unknown tag": a line that starts with a number is a trajectory's (TUM or
+    KITTI), not a graph's; otherwise, in strict mode, that --lenient skips such lines."""
+    try:
+        float(tag)
+    except ValueError:
+        return "" if options.lenient else " (--lenient skips lines it cannot read)"
+    return ": a line of numbers, as in a TUM or KITTI trajectory, not a g2o or TORO graph"
 
 
 def _assemble(group, collected: _Collected, checker: LineChecker):
