@@ -468,23 +468,26 @@ def test_lenient_mode_skips_and_reports(tmp_path):
     assert result.tag_counts == {"VERTEX_SE2": 3, "EDGE_SE2": 2}
     # A file of which nothing could be read is an error, not an empty graph.
     nothing = tmp_path / "nothing.g2o"
-    nothing.write_text("VERTEX_SE2 0 0 0\nROBOTLASER1 whatever\n")
-    with pytest.raises(GraphFileError) as raised:
-        read_graph(str(nothing), ReadOptions(lenient=True))
-    assert str(raised.value) == (
+    assert _refused_leniently(nothing, "VERTEX_SE2 0 0 0\nROBOTLASER1 whatever\n") == (
         f"{nothing}: holds no vertex or edge that could be read (2 line(s) skipped: 1 × VERTEX_SE2:"
         " expected 4 numbers after the tag, found 3 (first at line 1); 1 × unknown tag"
         " 'ROBOTLASER1' (first at line 2))"
     )
     # Nor is a file of which every line has an unknown tag: it says so, not "is it empty?".
     unknown = tmp_path / "unknown.g2o"
-    unknown.write_text("# a comment\nROBOTLASER1 whatever\nROBOTLASER1 1 2\n")
-    with pytest.raises(GraphFileError) as raised:
-        read_graph(str(unknown), ReadOptions(lenient=True))
-    assert str(raised.value) == (
+    lines = "# a comment\nROBOTLASER1 whatever\nROBOTLASER1 1 2\n"
+    assert _refused_leniently(unknown, lines) == (
         f"{unknown}: holds no vertices or edges (2 line(s) skipped: 2 × unknown tag"
         " 'ROBOTLASER1' (first at line 2))"
     )
+
+
+def _refused_leniently(path, text: str) -> str:
+    """The error of reading ``text``, written to ``path``, leniently."""
+    path.write_text(text)
+    with pytest.raises(GraphFileError) as raised:
+        read_graph(str(path), ReadOptions(lenient=True))
+    return str(raised.value)
 
 
 def test_lenient_mode_skips_sim3_lines_the_graph_would_refuse(tmp_path):
