@@ -52,10 +52,11 @@ def named_nodes(node_ids: np.ndarray, shown: int = 3) -> str:
 
 
 def element_problems(matrices: np.ndarray) -> tuple[np.ndarray, Callable[[int], str]]:
-    """Which of (n, m, m) finite matrices cannot be group elements, and what the k-th has: a
-    last entry other than 1 (by more than 1e-4), or a linear block of determinant ≤ 0. A Sim3
-    of scale 1e-110 has determinant 1e-330, which underflows to 0, and is refused; one of
-    scale e^300 has determinant +∞ and is accepted."""
+    """Which of (n, m, m) matrices cannot be group elements, and what the k-th has: a last
+    entry other than 1 (by more than 1e-4), or a linear block of determinant ≤ 0 (or NaN, for
+    a matrix that is not finite, which callers refuse first). A Sim3 of scale 1e-110 has
+    determinant 1e-330, which underflows to 0, and is refused; one of scale e^300 has
+    determinant +∞ and is accepted."""
     corner = matrices[:, -1, -1]
     with np.errstate(over="ignore", under="ignore"):
         determinant = np.linalg.det(matrices[:, :-1, :-1])
