@@ -21,8 +21,9 @@ from .initialization import (
     spanning_tree_values,
 )
 from .robust import KERNELS, Robustifier, RobustKernel, default_width
-from .solvers import STOPPED, TIME_LIMIT, Callback, Result, SolverOptions
+from .solvers import PHASES, STOPPED, TIME_LIMIT, Callback, Result, SolverOptions, Summary
 from .solvers import optimize as solve
+from .sparse_cholesky import resolve_backend
 
 ROBUST_EDGE_CLASSES = ("loops", "all")
 GNC_NAMES = ("gnc", "tls")
@@ -35,6 +36,10 @@ GNC_QUANTILE = 0.999
 """Default TLS threshold: an inlier's s = rᵀΩr exceeds √χ²_dof(0.999) once in a thousand."""
 WARM_START_QUANTILE = 0.999
 """A warm start restarts from chordal when its new measurements' Σ rᵀΩr exceeds χ²_m(0.999)."""
+COMPOSED = (
+    "the new nodes hang off the previous solution by a tree of edges: composed, already optimal"
+)
+"""The termination of a warm start that ``_solution_extends``: no iterations were needed."""
 RESTART = "chordal (restart: the new measurements disagree with the previous solution)"
 """The initialisation of a warm start that failed ``_agree_with_solution``."""
 KERNEL_QUANTILE = 0.95
@@ -144,7 +149,9 @@ def optimize(
     optimised before: its nodes keep their values, and nodes added since without values are
     composed from them along a spanning tree and refined alone, the solved nodes held; in least
     squares it restarts from chordal relaxation instead (``RESTART``) when the measurements
-    added since disagree with the previous solution (``_warm_start``). On a fresh graph it
+    added since disagree with the previous solution (``_warm_start``), and solves nothing
+    (``COMPOSED``) when all that was added is new nodes hanging off a converged solution by a
+    tree of edges (``_solution_extends``): composed, they are already optimal. On a fresh graph it
     picks chordal relaxation for graphs with loops, or odometry when ``robust`` is set (the
     odometry chain is trusted). While the structure is unchanged, the sparsity pattern and
     symbolic factorisation of the last call are reused; ``summary.reused`` says what was.
@@ -170,8 +177,13 @@ def optimize(
         if kernel.name in GNC_NAMES:
             gnc_problem = (kernel.label, measured)
     input_error = _cost(graph, kernel, measured) if graph.initialized.all() else None
-    reused = []
-    if init == "auto" and graph.optimized:
+    reused, composed = [], False
+    if init == "auto" and graph.optimized and robust is None and _solution_extends(graph):
+        solved = len(graph.solution.fixed)
+        _compose_new_nodes(graph, np.arange(graph.num_nodes) >= solved)
+        init, composed = "warm start", True
+        reused.append(f"previous solution ({solved} nodes)")
+    elif init == "auto" and graph.optimized:
         solved = int(graph.initialized.sum())
         if gnc_problem is not None:
             standing = _standing_decisions(graph, kernel.label, measured)
@@ -191,7 +203,10 @@ def optimize(
         graph.set_values(initialize(graph, init))
     init_time = time.perf_counter() - start
 
-    if kernel is None:
+    if composed:
+        result = _composed_result(graph, options)
+        edge_weights, prior_weights = np.ones(graph.num_edges), np.ones(len(graph.priors))
+    elif kernel is None:
         result = _solve_warm(graph, options, callback)
         edge_weights, prior_weights = np.ones(graph.num_edges), np.ones(len(graph.priors))
     else:
@@ -207,7 +222,14 @@ def optimize(
     result.summary.total_time = time.perf_counter() - start
     graph.set_values(result.values)
     graph.solution = Solution(
-        graph.edges, graph.priors, edge_weights, prior_weights, graph.fixed.copy(), gnc_problem
+        graph.edges,
+        graph.priors,
+        edge_weights,
+        prior_weights,
+        graph.fixed.copy(),
+        result.values,
+        result.summary,
+        gnc_problem,
     )
     return result
 
@@ -311,24 +333,77 @@ def _standing_decisions(graph: PoseGraph, label: str, measured: np.ndarray) -> n
     if solution.gnc is None or solution.gnc[0] != label:
         return None
     measured_then = solution.gnc[1]
-    old, old_edges = len(solution.fixed), len(solution.edges)
-    new_edges = np.arange(old_edges, graph.num_edges)
+    old_edges = len(solution.edges)
     if not (
-        graph.edges.starts_with(solution.edges)
-        and len(graph.priors) == len(solution.priors)
-        and graph.priors.starts_with(solution.priors)
-        and np.array_equal(measured[:old_edges], measured_then[:old_edges])
+        np.array_equal(measured[:old_edges], measured_then[:old_edges])
         and np.array_equal(measured[graph.num_edges :], measured_then[old_edges:])
-        and np.array_equal(graph.fixed[:old], solution.fixed)
-        and not graph.fixed[old:].any()
-        and not measured[new_edges].any()
-        and _hangs_a_tree(graph.edges.i[new_edges], graph.edges.j[new_edges], old, graph.num_nodes)
+        and not measured[old_edges : graph.num_edges].any()
+        and _grew_by_a_tree(graph)
     ):
         return None
-    kept = [solution.edge_weights > 0, np.ones(new_edges.size, dtype=bool)]
+    kept = [solution.edge_weights > 0, np.ones(graph.num_edges - old_edges, dtype=bool)]
     if len(measured) > graph.num_edges:  # the priors, as edges
         kept.append(solution.prior_weights > 0)
     return np.concatenate(kept)
+
+
+def _grew_by_a_tree(graph: PoseGraph) -> bool:
+    """Whether all that was added to the graph since its last solution is a tree of between
+    edges that hangs the new nodes off the solved ones: the solution's edges and priors come
+    first and unchanged, and no prior, no hold and no cycle is new. Each new node then has one
+    place that fits its edges exactly, and the problem over the solved nodes is as it was."""
+    solution = graph.solution
+    old, new_edges = len(solution.fixed), slice(len(solution.edges), None)
+    return (
+        graph.edges.starts_with(solution.edges)
+        and len(graph.priors) == len(solution.priors)
+        and graph.priors.starts_with(solution.priors)
+        and np.array_equal(graph.fixed[:old], solution.fixed)
+        and not graph.fixed[old:].any()
+        and _hangs_a_tree(graph.edges.i[new_edges], graph.edges.j[new_edges], old, graph.num_nodes)
+    )
+
+
+def _solution_extends(graph: PoseGraph) -> bool:
+    """Whether the last solution, with the new nodes composed along the new edges, is an
+    optimum of the graph in least squares: it was a converged least-squares solution, the
+    solved nodes still hold its values, and the graph grew by a tree (``_grew_by_a_tree``) of
+    edges whose information is full rank. The new edges' residuals are then zero and the rest
+    of the cost is at its optimum, so no solve can lower it."""
+    solution = graph.solution
+    old = len(solution.fixed)
+    new_edges = graph.edges.subset(slice(len(solution.edges), None))
+    return (
+        solution.summary.robust is None
+        and solution.summary.converged
+        and graph.initialized[:old].all()
+        and graph.values[:old].same_as(solution.values)
+        and _grew_by_a_tree(graph)
+        and bool(np.all(information_ranks(new_edges.information) == graph.group.dof))
+    )
+
+
+def _composed_result(graph: PoseGraph, options: SolverOptions) -> Result:
+    """The graph's values, an optimum by ``_solution_extends``, as a result of no iterations.
+    Its error is the solution's plus that of the new edges (zero, but for rounding), and the
+    free nodes are the solution's and the new ones (the tree adds no component and no hold)."""
+    previous = graph.solution.summary
+    new_edges = graph.edges.subset(slice(len(graph.solution.edges), None))
+    error = previous.final_error + 0.5 * float(between_squares(graph.values, new_edges).sum())
+    new_nodes = graph.num_nodes - len(graph.solution.fixed)
+    summary = Summary(
+        method=options.method,
+        linear_solver=resolve_backend(options.linear_solver),
+        initial_error=error,
+        final_error=error,
+        iterations=[],
+        termination=COMPOSED,
+        converged=True,
+        phase_times=dict.fromkeys(PHASES, 0.0),
+        total_time=0.0,
+        num_variables=previous.num_variables + new_nodes * graph.group.dof,
+    )
+    return Result(graph.values, summary)
 
 
 def _hangs_a_tree(i: np.ndarray, j: np.ndarray, old: int, count: int) -> bool:
@@ -360,11 +435,10 @@ def _agree_with_solution(graph: PoseGraph) -> bool:
     return chi2(graph.values, new_edges, new_priors) <= default_width(dof, WARM_START_QUANTILE) ** 2
 
 
-def _initialize_new_nodes(graph: PoseGraph, options: SolverOptions) -> None:
-    """Values for nodes added since the last solution: compose them from solved neighbours along
-    a spanning tree, then refine them alone (solved nodes held) over the edges that touch them,
-    so that the full solve starts close to its optimum."""
-    new = ~graph.initialized
+def _compose_new_nodes(graph: PoseGraph, new: np.ndarray) -> tuple[PoseGraph, np.ndarray]:
+    """Values for the ``new`` nodes (a mask), composed from the others along a spanning tree of
+    the edges that touch them (and set in the graph). Returns that local graph, the other nodes
+    held, with the new nodes' priors, and which of its nodes are new."""
     touching = new[graph.edges.i] | new[graph.edges.j]
     involved = new.copy()
     involved[graph.edges.i[touching]] = involved[graph.edges.j[touching]] = True
@@ -373,13 +447,23 @@ def _initialize_new_nodes(graph: PoseGraph, options: SolverOptions) -> None:
     local.fixed = solved
     local.priors = local.priors.subset(~solved[local.priors.i])
     local.set_values(align_to_priors(local, spanning_tree_values(local, known=solved)))
+    graph.set_values(graph.values.set_at(np.flatnonzero(new), local.values[~solved]))
+    return local, ~solved
+
+
+def _initialize_new_nodes(graph: PoseGraph, options: SolverOptions) -> None:
+    """Values for nodes added since the last solution: compose them from solved neighbours along
+    a spanning tree (``_compose_new_nodes``), then refine them alone (solved nodes held) over
+    the edges that touch them, so that the full solve starts close to its optimum."""
+    new = ~graph.initialized
+    local, local_new = _compose_new_nodes(graph, new)
     local_options = dataclasses.replace(
         options,
         relative_decrease=LOCAL_RELATIVE_DECREASE,
         max_iterations=min(options.max_iterations, LOCAL_MAX_ITERATIONS),
     )
     refined = solve(local, local_options)
-    graph.set_values(graph.values.set_at(np.flatnonzero(new), refined.values[~solved]))
+    graph.set_values(graph.values.set_at(np.flatnonzero(new), refined.values[local_new]))
 
 
 def _structure_key(graph: PoseGraph, options: SolverOptions) -> tuple:

@@ -13,10 +13,14 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable, Iterable
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .lie import SE2, SE3, LieGroup, Sim3
+
+if TYPE_CHECKING:
+    from .solvers import Summary
 
 POSE_GROUPS: tuple[type[LieGroup], ...] = (SE2, SE3, Sim3)
 
@@ -193,6 +197,10 @@ class Solution:
     prior_weights: np.ndarray
     fixed: np.ndarray
     """Which of the nodes then in the graph were held."""
+    values: LieGroup
+    """The values it left, one per node then in the graph."""
+    summary: Summary
+    """The summary of the call that left them (whether it converged, the cost there, …)."""
     gnc: tuple[str, np.ndarray] | None = None
     """The robust problem whose graduated non-convexity ran to its end here: the kernel's label
     and which measurements were under it (the between edges, then the priors where they were
@@ -309,10 +317,19 @@ class PoseGraph:
         on this graph (least squares or an IRLS kernel) with ``linear_solver``, if the graph's
         structure has not changed since (their pattern and symbolic factorisation still hold);
         else None."""
+        system = self.last_system(linear_solver)
+        if system is None or self.last_result[0][0] != self.structure_version:
+            return None
+        return system
+
+    def last_system(self, linear_solver: str):
+        """The normal equations of the last ``posegraph.optimize`` solved on this graph with
+        ``linear_solver``, whatever changed since (a pattern that new ones may grow from:
+        ``BlockPattern``), or None."""
         if self.last_result is None:
             return None
-        key, result = self.last_result
-        return result.system if key == (self.structure_version, linear_solver) else None
+        (_, backend), result = self.last_result
+        return result.system if backend == linear_solver else None
 
     def current_normal_matrix(self, values, linear_solver: str) -> np.ndarray | None:
         """H's CSC data at ``values``, in the pattern of ``current_system(linear_solver)``, if

@@ -104,7 +104,8 @@ def marginals(
     if not covariance_by_solves(index.size * d, groups.shape[1] * d):
         system = NormalEquations(graph, held, linear_solver, covariance_of=groups, previous=system)
     elif system is None:
-        system = NormalEquations(graph, held, linear_solver)
+        previous = graph.last_system(linear_solver)
+        system = NormalEquations(graph, held, linear_solver, previous=previous)
     else:
         assembled = graph.current_normal_matrix(values, linear_solver)
     try:

@@ -13,7 +13,7 @@ from posegraph_datasets.outliers import add_false_loops
 
 import posegraph
 from posegraph import sparse_cholesky
-from posegraph.api import RESTART, robust_mask
+from posegraph.api import COMPOSED, RESTART, robust_mask
 from posegraph.benchmarks.incremental import run, stream
 from posegraph.factors import between_squares, linearize_between, linearize_priors
 from posegraph.graph import PoseGraph
@@ -344,6 +344,108 @@ def test_warm_starts_reuse_the_solution_and_then_the_structure():
     )
 
 
+def test_new_poses_that_hang_off_the_solution_by_a_tree_are_composed_without_a_solve(
+    monkeypatch,
+):
+    """A back end adds poses with their odometry alone: the solution, with each new pose composed
+    from its neighbour, is already optimal (the new edges' residuals are zero and the rest is
+    unchanged), so no linear system is built. A pose given a value is composed too. A solve
+    from there and one from scratch agree, and so do the covariances."""
+    graph, _ = manhattan_world(num_poses=120, seed=89)
+    first = posegraph.optimize(graph)
+    solution, last = graph.values, int(graph.node_ids[-1])
+    step, back = SE2.from_xytheta([1.0, 0.1, 0.05]), SE2.from_xytheta([-0.8, 0.3, -0.2])
+    graph.add_node(last + 1)
+    graph.add_edge(last, last + 1, step, np.diag([50.0, 50.0, 200.0]))
+    graph.add_node(last + 2, SE2.from_xytheta([5.0, 5.0, 1.0]))  # replaced: not the optimum
+    graph.add_edge(last + 2, last + 1, back, np.array([[40.0, 5, 1], [5, 30, 2], [1, 2, 90]]))
+    built = _count_normal_equations(monkeypatch)
+    result = posegraph.optimize(graph)
+    summary = result.summary
+    assert built == [] and summary.termination == COMPOSED and summary.converged
+    assert summary.num_iterations == 0 and summary.initialization == "warm start"
+    assert graph.values[:120].same_as(solution)
+    np.testing.assert_allclose(
+        graph.matrices([last + 1, last + 2]),
+        [(solution[-1] @ step).as_matrix(), (solution[-1] @ step @ back.inverse()).as_matrix()],
+        atol=1e-12,
+    )
+    assert summary.final_error == pytest.approx(first.summary.final_error, rel=1e-12)
+    again = posegraph.optimize(graph.copy(), init="file").summary  # a solve from there
+    assert again.num_iterations <= 1 and again.num_variables == summary.num_variables
+    assert summary.phase_times.keys() == again.phase_times.keys()
+    assert again.final_error == pytest.approx(summary.final_error, rel=1e-12)
+    scratch = posegraph.optimize(graph.copy(), init="chordal").summary.final_error
+    assert summary.final_error <= scratch * (1 + 1e-9)
+    np.testing.assert_allclose(
+        posegraph.marginals(graph, [last + 2]),
+        posegraph.marginals(graph.copy(), [last + 2]),
+        rtol=1e-10,
+    )
+    restored = pickle.loads(pickle.dumps(graph))  # no cached system, the same solution
+    restored.add_node(last + 3)
+    restored.add_edge(last + 2, last + 3, step, np.eye(3))
+    assert posegraph.optimize(restored).summary.termination == COMPOSED
+
+
+def _add_odometry(graph: PoseGraph, information: np.ndarray | None = None) -> None:
+    last = int(graph.node_ids[-1])
+    graph.add_node(last + 1)
+    graph.add_edge(
+        last,
+        last + 1,
+        SE2.from_xytheta([1.0, 0.0, 0.1]),
+        np.eye(3) if information is None else information,
+    )
+
+
+@pytest.mark.parametrize(
+    "change",
+    [
+        "a loop",
+        "a prior",
+        "a held pose",
+        "a held pose released",
+        "a pose alone",
+        "a position-only edge",
+        "moved values",
+        "a solve stopped early",
+        "a robust solve",
+    ],
+)
+def test_a_solve_follows_where_a_tree_of_new_poses_is_not_all_that_changed(change):
+    """The solution extends to the new poses only if nothing else changed: otherwise the warm
+    start solves, and ends where a fresh solve does."""
+    graph, _ = manhattan_world(num_poses=60, seed=90)
+    if change == "a held pose released":
+        graph.fix([30])  # at the generator's start value, off the optimum
+    posegraph.optimize(
+        graph,
+        options=posegraph.SolverOptions(max_iterations=1)
+        if change == "a solve stopped early"
+        else None,
+        robust="huber" if change == "a robust solve" else None,
+    )
+    last = int(graph.node_ids[-1])
+    _add_odometry(graph, np.diag([1.0, 1.0, 0.0]) if change == "a position-only edge" else None)
+    if change == "a loop":
+        graph.add_edge(int(graph.node_ids[0]), last + 1, SE2.identity(), np.eye(3))
+    elif change == "a prior":
+        graph.add_prior(last + 1, SE2.from_xytheta([0.0, 0.0, 0.0]), np.eye(3))
+    elif change == "a held pose":
+        graph.fix([last + 1])
+    elif change == "a held pose released":
+        graph.fix([30], fixed=False)
+    elif change == "a pose alone":
+        graph.add_node(last + 2, SE2.identity())
+    elif change == "moved values":
+        graph.set_values(graph.values.retract(np.full((graph.num_nodes, 3), 1e-3)))
+    result = posegraph.optimize(graph)
+    assert result.summary.termination != COMPOSED and result.summary.num_variables > 0
+    scratch = posegraph.optimize(graph.copy(), init="chordal").summary.final_error
+    assert result.summary.final_error == pytest.approx(scratch, rel=1e-6)
+
+
 def test_streaming_with_false_loops_rejects_them_as_a_batch_call_does(tmp_path):
     """The incremental benchmark's robust mode (``--robust gnc --false-loops``): every call of
     the stream, warm-started, runs GNC, and the last one rejects exactly the false loops, which
@@ -558,9 +660,8 @@ def test_an_optimised_graph_and_its_result_pickle_and_warm_start_alike():
     assert copy.deepcopy(result).summary == result.summary
     summaries = []
     for g in [graph, *copies]:
-        last = int(g.node_ids[-1])
-        g.add_node(last + 1)
-        g.add_edge(last, last + 1, SE2.from_xytheta([1.0, 0.0, 0.0]), np.eye(3))
+        first, last = int(g.node_ids[0]), int(g.node_ids[-1])
+        g.add_edge(first, last, g.values[0].between(g.values[-1]), np.eye(3))
         summaries.append(posegraph.optimize(g).summary)
     assert all(s.initialization == "warm start" for s in summaries)
     assert "sparsity pattern (grown)" in summaries[0].reused
@@ -583,15 +684,17 @@ def test_unchanged_structure_reuses_pattern_and_symbolic_factorization():
     )
     assert not any(r.startswith("linearization") for r in second.summary.reused)  # nodes moved
     assert second.summary.final_error == pytest.approx(first.summary.final_error, rel=1e-6)
-    again = posegraph.optimize(graph)  # nothing changed: the last linearisation still holds
-    assert f"linearization of {graph.num_edges} edges" in again.summary.reused
-    assert again.summary.final_error == pytest.approx(second.summary.final_error, rel=1e-9)
+    again = posegraph.optimize(graph)  # nothing changed: the solution stands, with no solve
+    assert again.summary.termination == COMPOSED and again.values.same_as(second.values)
+    assert again.summary.final_error == second.summary.final_error
     graph.add_edge(
         graph.node_ids[0], graph.node_ids[30], graph.values[0].between(graph.values[30]), np.eye(3)
     )
     third = posegraph.optimize(graph)
     assert "sparsity pattern" not in third.summary.reused  # the structure changed
     assert "sparsity pattern (grown)" in third.summary.reused  # by an appended edge
+    # The edges solved before keep their linearisation: their nodes have not moved since.
+    assert f"linearization of {graph.num_edges - 1} edges" in third.summary.reused
     graph.remove_edges([graph.num_edges - 1])
     fourth = posegraph.optimize(graph)
     assert not any(r.startswith("sparsity pattern") for r in fourth.summary.reused)

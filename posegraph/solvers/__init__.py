@@ -2,10 +2,11 @@
 
 from .optimize import MAX_ITERATIONS, STOPPED, TIME_LIMIT, Callback, optimize
 from .options import SolverOptions
-from .summary import IterationRecord, Result, Summary
+from .summary import PHASES, IterationRecord, Result, Summary
 
 __all__ = [
     "MAX_ITERATIONS",
+    "PHASES",
     "STOPPED",
     "TIME_LIMIT",
     "Callback",

@@ -40,7 +40,7 @@ from ..linear import NormalEquations
 from ..observability import describe_unmeasured, unmeasured_directions, unmeasured_share
 from ..sparse_cholesky import NotPositiveDefinite
 from .options import DEFAULT_INITIAL_DAMPING, SolverOptions
-from .summary import IterationRecord, Result, Summary
+from .summary import PHASES, IterationRecord, Result, Summary
 
 Callback = Callable[[IterationRecord], bool | None]
 """Called after every iteration; returning True stops the run (termination ``STOPPED``)."""
@@ -49,15 +49,13 @@ TIME_LIMIT = "time limit reached"
 MAX_ITERATIONS = "maximum iterations reached"
 NOT_FINITE = "the error at the start is not finite (values or residuals beyond double precision)"
 
-_PHASES = ("linearize", "assemble", "factorize", "solve", "other")
-
 
 class _Clock:
     """Accumulates wall-clock time per phase."""
 
     def __init__(self) -> None:
         self.start = time.perf_counter()
-        self.times = dict.fromkeys(_PHASES, 0.0)
+        self.times = dict.fromkeys(PHASES, 0.0)
         self._mark = self.start
 
     def lap(self, phase: str) -> None:

@@ -6,6 +6,9 @@ import dataclasses
 
 from ..lie import LieGroup
 
+PHASES = ("linearize", "assemble", "factorize", "solve", "other")
+"""The phases that ``Summary.phase_times`` times."""
+
 
 @dataclasses.dataclass(frozen=True)
 class IterationRecord:
