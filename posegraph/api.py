@@ -151,10 +151,11 @@ def optimize(
     squares it restarts from chordal relaxation instead (``RESTART``) when the measurements
     added since disagree with the previous solution (``_warm_start``), and solves nothing
     (``COMPOSED``) when all that was added is new nodes hanging off a converged solution by a
-    tree of edges (``_solution_extends``): composed, they are already optimal. On a fresh graph it
-    picks chordal relaxation for graphs with loops, or odometry when ``robust`` is set (the
-    odometry chain is trusted). While the structure is unchanged, the sparsity pattern and
-    symbolic factorisation of the last call are reused; ``summary.reused`` says what was.
+    tree of edges (``_solution_extends``; in GNC, where its decisions stand): composed, they are
+    already optimal. On a fresh graph it picks chordal relaxation for graphs with loops, or
+    odometry when ``robust`` is set (the odometry chain is trusted). While the structure is
+    unchanged, the sparsity pattern and symbolic factorisation of the last call are reused;
+    ``summary.reused`` says what was.
     ``robust``: None for least squares; "gnc" for graduated non-convexity with a truncated
     least-squares kernel (``posegraph.gnc``); or a kernel "huber", "cauchy", "geman-mcclure",
     "tukey", "dcs"; each optionally ":WIDTH" in Mahalanobis units (by default, per measurement,
@@ -164,7 +165,8 @@ def optimize(
     priors too (fixes from GNSS, say; ``posegraph.anchoring``). The summary lists the rejected
     edges and priors (s = rᵀΩr > width²). A GNC call runs the whole of GNC again, unless all
     that was added since the last one is new poses hanging off the map by trusted edges: then
-    its decisions stand (``_standing_decisions``), and it solves over them.
+    its decisions stand (``_standing_decisions``), and it composes the new poses as above, or
+    solves over the decisions where the solution does not extend.
 
     The graph's values are replaced by the initial ones; the result holds the optimum.
     """
@@ -178,16 +180,17 @@ def optimize(
             gnc_problem = (kernel.label, measured)
     input_error = _cost(graph, kernel, measured) if graph.initialized.all() else None
     reused, composed = [], False
-    if init == "auto" and graph.optimized and robust is None and _solution_extends(graph):
-        solved = len(graph.solution.fixed)
-        _compose_new_nodes(graph, np.arange(graph.num_nodes) >= solved)
-        init, composed = "warm start", True
-        reused.append(f"previous solution ({solved} nodes)")
-    elif init == "auto" and graph.optimized:
+    if init == "auto" and graph.optimized:
         solved = int(graph.initialized.sum())
         if gnc_problem is not None:
             standing = _standing_decisions(graph, kernel.label, measured)
-        init = _warm_start(graph, options, least_squares=robust is None)
+        same_problem = standing is not None if robust else graph.solution.summary.robust is None
+        if same_problem and _solution_extends(graph):
+            solved = len(graph.solution.fixed)
+            _compose_new_nodes(graph, np.arange(graph.num_nodes) >= solved)
+            init, composed = "warm start", True
+        else:
+            init = _warm_start(graph, options, least_squares=robust is None)
         if init == "warm start":
             reused.append(f"previous solution ({solved} nodes)")
         if standing is not None:
@@ -205,7 +208,9 @@ def optimize(
 
     if composed:
         result = _composed_result(graph, options)
-        edge_weights, prior_weights = np.ones(graph.num_edges), np.ones(len(graph.priors))
+        edge_weights, prior_weights = graph.solution.weights_for(graph.edges, graph.priors)
+        if kernel is not None:  # GNC's decisions stand
+            _record_robust(result.summary, kernel, measured, np.flatnonzero(~standing), graph)
     elif kernel is None:
         result = _solve_warm(graph, options, callback)
         edge_weights, prior_weights = np.ones(graph.num_edges), np.ones(len(graph.priors))
@@ -294,14 +299,24 @@ def _robust_solve(
     anchored = work is not graph
     if anchored:  # the world node is last; the system and linearisation are work's
         result = Result(result.values[: graph.num_nodes], result.summary)
+    _record_robust(result.summary, kernel, measured, rejected, graph)
     count = graph.num_edges
-    result.summary.robust = kernel.label
-    result.summary.rejected_edges = rejected[rejected < count].tolist()
-    result.summary.rejected_priors = (rejected[rejected >= count] - count).tolist()
-    result.summary.edges_under_kernel = int(measured[:count].sum())
-    result.summary.priors_under_kernel = int(measured[count:].sum())
     prior_weights = weights[count:] if anchored else np.ones(len(graph.priors))
     return result, weights[:count], prior_weights
+
+
+def _record_robust(
+    summary: Summary, kernel: _Kernel, measured: np.ndarray, rejected: np.ndarray, graph: PoseGraph
+) -> None:
+    """Record in ``summary`` the kernel, the rejected measurements (``rejected``, indices over
+    the robust problem's edges: the between edges, then the priors where ``measured`` holds
+    them; ``_robust_class``) and how many of each the kernel covered."""
+    count = graph.num_edges
+    summary.robust = kernel.label
+    summary.rejected_edges = rejected[rejected < count].tolist()
+    summary.rejected_priors = (rejected[rejected >= count] - count).tolist()
+    summary.edges_under_kernel = int(measured[:count].sum())
+    summary.priors_under_kernel = int(measured[count:].sum())
 
 
 def _warm_start(graph: PoseGraph, options: SolverOptions, least_squares: bool) -> str:
@@ -366,16 +381,16 @@ def _grew_by_a_tree(graph: PoseGraph) -> bool:
 
 def _solution_extends(graph: PoseGraph) -> bool:
     """Whether the last solution, with the new nodes composed along the new edges, is an
-    optimum of the graph in least squares: it was a converged least-squares solution, the
-    solved nodes still hold its values, and the graph grew by a tree (``_grew_by_a_tree``) of
-    edges whose information is full rank. The new edges' residuals are then zero and the rest
-    of the cost is at its optimum, so no solve can lower it."""
+    optimum of the graph, given that the problem over the solved nodes is the one it solved
+    (least squares again, or GNC's decisions standing: the caller checks): its solve converged,
+    the solved nodes still hold its values, and the graph grew by a tree (``_grew_by_a_tree``)
+    of edges whose information is full rank. The new edges' residuals are then zero and the
+    rest of the cost is at its optimum, so no solve can lower it."""
     solution = graph.solution
     old = len(solution.fixed)
     new_edges = graph.edges.subset(slice(len(solution.edges), None))
     return (
-        solution.summary.robust is None
-        and solution.summary.converged
+        solution.summary.converged
         and graph.initialized[:old].all()
         and graph.values[:old].same_as(solution.values)
         and _grew_by_a_tree(graph)
