@@ -391,7 +391,6 @@ def _solution_extends(graph: PoseGraph) -> bool:
     new_edges = graph.edges.subset(slice(len(solution.edges), None))
     return (
         solution.summary.converged
-        and graph.initialized[:old].all()
         and graph.values[:old].same_as(solution.values)
         and _grew_by_a_tree(graph)
         and bool(np.all(information_ranks(new_edges.information) == graph.group.dof))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import dataclasses
 import importlib
 import pickle
 
@@ -403,7 +404,9 @@ def _add_odometry(graph: PoseGraph, information: np.ndarray | None = None) -> No
     "change",
     [
         "a loop",
+        "an edge removed",
         "a prior",
+        "a prior replaced",
         "a held pose",
         "a held pose released",
         "a pose alone",
@@ -419,6 +422,8 @@ def test_a_solve_follows_where_a_tree_of_new_poses_is_not_all_that_changed(chang
     graph, _ = manhattan_world(num_poses=60, seed=90)
     if change == "a held pose released":
         graph.fix([30])  # at the generator's start value, off the optimum
+    if change == "a prior replaced":
+        graph.add_prior(0, graph.values[0], np.eye(3))
     posegraph.optimize(
         graph,
         options=posegraph.SolverOptions(max_iterations=1)
@@ -427,11 +432,16 @@ def test_a_solve_follows_where_a_tree_of_new_poses_is_not_all_that_changed(chang
         robust="huber" if change == "a robust solve" else None,
     )
     last = int(graph.node_ids[-1])
+    if change == "an edge removed":  # and one more added: the new edges' count fits a tree
+        graph.remove_edges([np.flatnonzero(robust_mask(graph, "loops"))[0]])
     _add_odometry(graph, np.diag([1.0, 1.0, 0.0]) if change == "a position-only edge" else None)
-    if change == "a loop":
+    if change in ("a loop", "an edge removed"):
         graph.add_edge(int(graph.node_ids[0]), last + 1, SE2.identity(), np.eye(3))
     elif change == "a prior":
         graph.add_prior(last + 1, SE2.from_xytheta([0.0, 0.0, 0.0]), np.eye(3))
+    elif change == "a prior replaced":  # as a caller may, in place: the count stays
+        moved = graph.priors.measurements.retract(np.full((1, 3), 0.5))
+        graph.priors = dataclasses.replace(graph.priors, measurements=moved)
     elif change == "a held pose":
         graph.fix([last + 1])
     elif change == "a held pose released":
