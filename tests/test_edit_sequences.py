@@ -3,7 +3,8 @@ values, edges, priors; hold and release nodes; remove edges; optimise, by least 
 robustly; read covariances), drawn by hypothesis: every call either works or is refused with a
 ValueError, and each least-squares call that warm-starts from the last ends no higher than a
 fresh solve of a copy, which rebuilds everything (a sequence fuzzer found an IndexError in the
-growth of an all-held graph's sparsity pattern this way)."""
+growth of an all-held graph's sparsity pattern this way). A call that composed new nodes
+without a solve (``COMPOSED``) ends no higher than a solve from its values either."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import numpy as np
 import pytest
 
 import posegraph
+from posegraph.api import COMPOSED
 from posegraph.graph import PoseGraph
 from posegraph.lie import SE2, SE3, Sim3
 
@@ -64,6 +66,9 @@ def _apply(graph: PoseGraph, step: tuple, rng: np.random.Generator) -> None:
             scratch = posegraph.optimize(fresh).summary
             limit = scratch.final_error * (1 + WARM_TOLERANCE) + 1e-9
             assert warm.final_error <= limit, (warm.initialization, scratch.final_error)
+        if fresh is not None and warm.termination == COMPOSED:
+            again = posegraph.optimize(graph.copy(), init="file").summary
+            assert warm.final_error <= again.final_error * (1 + WARM_TOLERANCE) + 1e-9
     elif kind == "marginals" and graph.num_nodes and graph.optimized:
         covariance = posegraph.marginals(graph, graph.node_ids[:3], joint=step[1])
         assert np.isfinite(covariance).all()
