@@ -40,6 +40,8 @@ COMPOSED = (
     "the new nodes hang off the previous solution by a tree of edges: composed, already optimal"
 )
 """The termination of a warm start that ``_solution_extends``: no iterations were needed."""
+DECISIONS_AS_START = "with the new measurements kept, as the search's start"
+"""How ``summary.reused`` names GNC's previous decisions when its search started from them."""
 RESTART = "chordal (restart: the new measurements disagree with the previous solution)"
 """The initialisation of a warm start that failed ``_agree_with_solution``."""
 KERNEL_QUANTILE = 0.95
@@ -163,16 +165,19 @@ def optimize(
     ``_robust_kernel``), applied to ``robust_edges`` ("loops", "all", or a boolean mask over
     the between edges or their indices: ``robust_mask``) and, with ``robust_priors``, to the
     priors too (fixes from GNSS, say; ``posegraph.anchoring``). The summary lists the rejected
-    edges and priors (s = rᵀΩr > width²). A GNC call runs the whole of GNC again, unless all
-    that was added since the last one is new poses hanging off the map by trusted edges: then
-    its decisions stand (``_standing_decisions``), and it composes the new poses as above, or
-    solves over the decisions where the solution does not extend.
+    edges and priors (s = rᵀΩr > width²). A GNC call on a graph that has only grown since the
+    last one carries that run's decisions (``_previous_decisions``). They stand when all that
+    was added is new poses hanging off the map by trusted edges (``_standing_decisions``): the
+    call composes the new poses as above, or solves over the decisions where the solution does
+    not extend. Otherwise (a new loop, say) they start GNC's search, with the new measurements
+    kept, if least squares over them settles as it is (``posegraph.gnc``); else the whole of
+    GNC runs again.
 
     The graph's values are replaced by the initial ones; the result holds the optimum.
     """
     options = options or SolverOptions()
     start = time.perf_counter()
-    kernel, measured, gnc_problem, standing = None, None, None, None
+    kernel, measured, gnc_problem, decisions, standing = None, None, None, None, None
     if robust is not None:  # checked before any work is done
         measured = _robust_class(graph, robust_mask(graph, robust_edges), robust_priors)
         kernel = _robust_kernel(robust, graph, measured)
@@ -183,7 +188,9 @@ def optimize(
     if init == "auto" and graph.optimized:
         solved = int(graph.initialized.sum())
         if gnc_problem is not None:
-            standing = _standing_decisions(graph, kernel.label, measured)
+            decisions = _previous_decisions(graph, kernel.label, measured)
+        if decisions is not None and _standing_decisions(graph, decisions, measured):
+            standing = decisions
         same_problem = standing is not None if robust else graph.solution.summary.robust is None
         if same_problem and _solution_extends(graph):
             solved = len(graph.solution.fixed)
@@ -216,7 +223,7 @@ def optimize(
         edge_weights, prior_weights = np.ones(graph.num_edges), np.ones(len(graph.priors))
     else:
         result, edge_weights, prior_weights = _robust_solve(
-            graph, kernel, measured, options, callback, standing
+            graph, kernel, measured, options, callback, standing, decisions
         )
         if result.summary.termination in (STOPPED, TIME_LIMIT) or options.max_iterations == 0:
             gnc_problem = None  # its decisions are not final
@@ -275,16 +282,24 @@ def _robust_solve(
     options: SolverOptions,
     callback: Callback | None,
     standing: np.ndarray | None = None,
+    decisions: np.ndarray | None = None,
 ) -> tuple[Result, np.ndarray, np.ndarray]:
     """The robust branch of ``optimize``, from the graph's values: (result, edge weights, prior
     weights), the weights those of the solution (0 where rejected). The summary records the
     kernel and the rejected edges and priors; its errors are the robust cost (``_cost``).
     ``measured`` is the robust class (``_robust_class``); ``standing``, GNC's decisions that
-    stand (``_standing_decisions``), if any."""
+    stand (``_standing_decisions``), if any; ``decisions``, the last GNC run's carried to this
+    graph (``_previous_decisions``), if any, which GNC's search may start from."""
     work = _robust_problem(graph, measured)
     if kernel.name in GNC_NAMES:
-        outcome = gnc_tls(work, measured, kernel.widths, options, callback, kept=standing)
+        outcome = gnc_tls(
+            work, measured, kernel.widths, options, callback, kept=standing, start=decisions
+        )
         result, rejected = outcome.result, outcome.rejected
+        if outcome.from_start:
+            result.summary.reused.append(
+                f"GNC's decisions ({np.count_nonzero(~decisions)} rejected), {DECISIONS_AS_START}"
+            )
         weights = np.ones(work.num_edges)
         weights[rejected] = 0.0
     else:
@@ -335,31 +350,46 @@ def _warm_start(graph: PoseGraph, options: SolverOptions, least_squares: bool) -
     return "warm start"
 
 
-def _standing_decisions(graph: PoseGraph, label: str, measured: np.ndarray) -> np.ndarray | None:
-    """The edges of the robust problem (``_robust_problem``) that the last GNC run kept, if its
-    decisions stand for ``graph``; else None. They stand when that run solved the same problem
-    to its end (the kernel ``label``, and the robust class ``measured`` the same over its
-    measurements), and all that was added since is a tree of trusted between edges that hangs
-    free new nodes off the solved ones: nothing in ``measured``, no prior, no hold, no cycle.
-    The TLS problem over the solved nodes is then unchanged, and each new node has one place
-    that fits its edges exactly, so the decisions are as good for the grown graph as they were
-    for the old one, and a least-squares solve over them ends it."""
+def _previous_decisions(graph: PoseGraph, label: str, measured: np.ndarray) -> np.ndarray | None:
+    """The last GNC run's decisions, carried to the robust problem (``_robust_problem``) of the
+    grown graph: the edges (and priors, where the problem holds them) that the run kept, and
+    every measurement appended since. None unless that run solved the same problem to its end
+    (the kernel ``label``, and the robust class ``measured`` the same over its measurements)
+    and the graph has only grown since: its measurements come first and unchanged."""
     solution = graph.solution
     if solution.gnc is None or solution.gnc[0] != label:
         return None
     measured_then = solution.gnc[1]
-    old_edges = len(solution.edges)
+    old_edges, old_priors = len(solution.edges), len(solution.priors)
+    with_priors, then_with_priors = len(measured) > graph.num_edges, len(measured_then) > old_edges
+    if with_priors != then_with_priors and old_priors > 0:
+        return None  # the priors joined or left the robust problem
+    old = np.arange(old_edges)
+    if then_with_priors:
+        old = np.concatenate([old, graph.num_edges + np.arange(old_priors)])
     if not (
-        np.array_equal(measured[:old_edges], measured_then[:old_edges])
-        and np.array_equal(measured[graph.num_edges :], measured_then[old_edges:])
-        and not measured[old_edges : graph.num_edges].any()
-        and _grew_by_a_tree(graph)
+        graph.edges.starts_with(solution.edges)
+        and graph.priors.starts_with(solution.priors)
+        and np.array_equal(measured[old], measured_then)
     ):
         return None
-    kept = [solution.edge_weights > 0, np.ones(graph.num_edges - old_edges, dtype=bool)]
-    if len(measured) > graph.num_edges:  # the priors, as edges
-        kept.append(solution.prior_weights > 0)
-    return np.concatenate(kept)
+    kept = np.ones(len(measured), dtype=bool)
+    kept[:old_edges] = solution.edge_weights > 0
+    if with_priors:
+        kept[graph.num_edges : graph.num_edges + old_priors] = solution.prior_weights > 0
+    return kept
+
+
+def _standing_decisions(graph: PoseGraph, decisions: np.ndarray, measured: np.ndarray) -> bool:
+    """Whether the last GNC run's ``decisions`` (``_previous_decisions``) stand for the grown
+    graph: all that was added since is a tree of trusted between edges that hangs free new
+    nodes off the solved ones, nothing in ``measured``, no prior, no hold, no cycle. The TLS
+    problem over the solved nodes is then unchanged, and each new node has one place that fits
+    its edges exactly, so the decisions are as good for the grown graph as they were for the
+    old one, and a least-squares solve over them ends it."""
+    return not measured[len(graph.solution.edges) : graph.num_edges].any() and _grew_by_a_tree(
+        graph
+    )
 
 
 def _grew_by_a_tree(graph: PoseGraph) -> bool:

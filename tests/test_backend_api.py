@@ -14,11 +14,11 @@ from posegraph_datasets.outliers import add_false_loops
 
 import posegraph
 from posegraph import sparse_cholesky
-from posegraph.api import COMPOSED, RESTART, robust_mask
-from posegraph.benchmarks.incremental import run, stream
+from posegraph.api import COMPOSED, DECISIONS_AS_START, RESTART, robust_mask
+from posegraph.benchmarks.incremental import arrivals, run, stream
 from posegraph.factors import between_squares, linearize_between, linearize_priors
 from posegraph.graph import PoseGraph
-from posegraph.io import write_graph
+from posegraph.io import read_graph, write_graph
 from posegraph.lie import SE2, SE3, SO3, Sim3
 from posegraph.linear import NormalEquations
 from posegraph.solvers import STOPPED
@@ -570,37 +570,150 @@ def _one_true_loop_trusted(graph: PoseGraph) -> np.ndarray:
     return mask
 
 
+def _remove_first_loop(graph: PoseGraph) -> None:
+    graph.remove_edges([np.flatnonzero(robust_mask(graph, "loops"))[0]])
+
+
+def _remeasure_first_loop(graph: PoseGraph) -> None:
+    """Replaces the first loop's measurement in place by one a little off, as a caller may."""
+    first = np.flatnonzero(robust_mask(graph, "loops"))[0]
+    nudged = graph.edges.measurements[first] @ SE2.from_xytheta([0.01, 0.0, 0.0])
+    moved = graph.edges.measurements.set_at([first], nudged)
+    graph.edges = dataclasses.replace(graph.edges, measurements=moved)
+
+
+def _replace_first_prior(graph: PoseGraph) -> None:
+    """Replaces the prior added before the first solve in place, as a caller may."""
+    moved = graph.priors.measurements.set_at([0], SE2.from_xytheta([0.1, 0.0, 0.0]))
+    graph.priors = dataclasses.replace(graph.priors, measurements=moved)
+
+
+def _searched_from_decisions(summary) -> bool:
+    return any(DECISIONS_AS_START in reuse for reuse in summary.reused)
+
+
 @pytest.mark.parametrize(
-    "change, robust, robust_edges",
+    "change, robust, robust_edges, search",
     [
-        (_add_loop, "gnc", "loops"),
-        (_add_second_odometry, "gnc", "loops"),
-        (_add_prior, "gnc", "loops"),
-        (lambda graph: graph.fix([151]), "gnc", "loops"),
-        (lambda graph: None, "gnc:3", "loops"),
-        (lambda graph: None, "gnc", _one_true_loop_trusted),
+        (_add_loop, "gnc", "loops", "both"),
+        (_add_second_odometry, "gnc", "loops", "decisions"),
+        (_add_prior, "gnc", "loops", "decisions"),
+        (lambda graph: graph.fix([151]), "gnc", "loops", "decisions"),
+        (lambda graph: None, "gnc:3", "loops", "stages"),
+        (lambda graph: None, "gnc", _one_true_loop_trusted, "stages"),
+        (_remove_first_loop, "gnc", "loops", "stages"),
+        (_replace_first_prior, "gnc", "loops", "stages"),
+        (_remeasure_first_loop, "gnc", "loops", "stages"),
     ],
     ids=[
-        "a new loop",
+        "a new false loop",
         "a cycle of trusted edges",
         "a prior",
         "a hold",
         "another width",
         "one old edge left out of the class",
+        "an old loop removed",
+        "a prior replaced",
+        "an old loop remeasured",
     ],
 )
 def test_gnc_decides_again_when_what_was_added_could_change_its_decisions(
-    change, robust, robust_edges
+    change, robust, robust_edges, search
 ):
+    """The decisions do not stand, and the call searches: from them alone where the graph only
+    grew under the same kernel and least squares over them settles as it is; from GNC's stages
+    where they are not carried; from the better of both where least squares over them does not
+    settle as it is (the new false loop, which they keep, misfits there). Either way the new
+    false loop ends rejected."""
     graph, _ = _city_with_false_loops()
-    posegraph.optimize(graph, robust="gnc")
+    graph.add_prior(0, SE2.identity(), np.eye(3))
+    first = posegraph.optimize(graph, robust="gnc")
     _drive_on(graph, 5)
     change(graph)
     if callable(robust_edges):
         robust_edges = robust_edges(graph)
     summary = posegraph.optimize(graph, robust=robust, robust_edges=robust_edges).summary
-    assert "least squares" in _stages(summary)
-    assert not any("GNC's decisions" in reuse for reuse in summary.reused)
+    assert not any("nothing added since" in reuse for reuse in summary.reused)
+    assert summary.termination != COMPOSED
+    assert ("least squares" in _stages(summary)) == (search != "decisions")
+    if search == "decisions":
+        assert _searched_from_decisions(summary)
+    if search == "stages":
+        assert not _searched_from_decisions(summary) and "previous decisions" not in _stages(
+            summary
+        )
+    if search == "both":
+        assert {"previous decisions", "least squares"} <= _stages(summary)
+        assert summary.rejected_edges == [*first.summary.rejected_edges, graph.num_edges - 1]
+
+
+def test_gnc_searches_from_its_decisions_when_a_true_loop_arrives():
+    """A true loop closed after the last GNC run: least squares over the run's decisions with
+    the loop kept settles as it is, so the search starts there, and ends where GNC on the whole
+    graph from scratch ends."""
+    graph, false = _city_with_false_loops()
+    true_loops = np.flatnonzero(robust_mask(graph, "loops") & ~false)
+    held_out = graph.edges.subset([true_loops[-1]])
+    ends = graph.node_ids[held_out.i[0]], graph.node_ids[held_out.j[0]]
+    graph.remove_edges([true_loops[-1]])
+    false = np.append(np.delete(false, true_loops[-1]), False)
+    first = posegraph.optimize(graph, robust="gnc")
+    graph.add_edge(*ends, held_out.measurements[0], held_out.information[0])
+    scratch = graph.copy()
+    scratch.solution = None
+    second = posegraph.optimize(graph, robust="gnc")
+    assert _searched_from_decisions(second.summary)
+    assert "least squares" not in _stages(second.summary)
+    assert "previous decisions" in _stages(second.summary)
+    assert second.summary.rejected_edges == np.flatnonzero(false).tolist()
+    assert np.abs(first.values.between(second.values).log()).max() > 1e-3  # the loop moved it
+    again = posegraph.optimize(scratch, robust="gnc")
+    assert again.summary.rejected_edges == second.summary.rejected_edges
+    assert second.summary.final_error == pytest.approx(again.summary.final_error, rel=1e-9)
+    # Both stop at Levenberg-Marquardt's tolerance, from different starts (poses ≈ 10 apart).
+    np.testing.assert_allclose(second.values.as_matrix(), again.values.as_matrix(), atol=1e-5)
+
+
+def test_gnc_streamed_keeps_decisions_that_beat_its_stages(shared_dataset):
+    """MIT with 30% false loops (seed 0), streamed in steps of 10 poses, GNC at every step. At
+    the step to 800 poses, least squares over the last decisions with the new loops misfits, and
+    GNC's stages from there keep a false loop and reject three true ones; the decisions settled
+    from that solution reach a lower TLS objective, and the search goes on from them. The stream
+    ends with every false loop rejected and every true one kept, below the TLS objective of GNC
+    on the whole graph from scratch (which rejects 3 of the 20 true loops)."""
+    full = read_graph(shared_dataset("MIT.g2o")).graph
+    full, false = add_false_loops(full, 0.3, seed=0)
+    false = false[np.argsort(arrivals(full, 10)[1], kind="stable")]
+    for graph in stream(full, 10):
+        summary = posegraph.optimize(graph, robust="gnc").summary
+    assert summary.rejected_edges == np.flatnonzero(false).tolist()
+    scratch = graph.copy()
+    scratch.solution = None
+    assert summary.final_error < posegraph.optimize(scratch, robust="gnc").summary.final_error
+
+
+@pytest.mark.parametrize("which", ["true", "false"])
+def test_gnc_with_robust_priors_searches_on_when_a_fix_arrives(which):
+    """With ``robust_priors`` a new fix (a prior) is a new measurement under the kernel: the
+    call searches, from the last run's decisions where least squares over them settles, and
+    ends with the rejections of GNC on the whole graph from scratch."""
+    graph, false_fixes = city_with_fixes(0.3, seed=0)
+    last = np.flatnonzero(false_fixes == (which == "false"))[-1]
+    held_out = graph.priors.subset([last])
+    kept = np.arange(len(graph.priors)) != last
+    graph.priors = graph.priors.subset(kept)
+    posegraph.optimize(graph, robust="gnc", robust_priors=True)
+    graph.add_prior(
+        graph.node_ids[held_out.i[0]], held_out.measurements[0], held_out.information[0]
+    )
+    scratch = graph.copy()
+    scratch.solution = None
+    second = posegraph.optimize(graph, robust="gnc", robust_priors=True).summary
+    again = posegraph.optimize(scratch, robust="gnc", robust_priors=True).summary
+    false_now = np.append(false_fixes[kept], which == "false")
+    assert second.rejected_priors == again.rejected_priors == np.flatnonzero(false_now).tolist()
+    if which == "true":
+        assert _searched_from_decisions(second) and "least squares" not in _stages(second)
 
 
 def test_gnc_decides_again_when_the_priors_leave_the_kernel():

@@ -25,7 +25,7 @@ import numpy as np
 from posegraph_datasets.outliers import add_false_loops, rejection_rates
 from posegraph_datasets.paths import gtsam_data_dir
 
-from ..api import COMPOSED, RESTART, optimize
+from ..api import COMPOSED, DECISIONS_AS_START, RESTART, optimize
 from ..graph import PoseGraph
 from ..initialization import spanning_tree_values
 from ..io import read_graph
@@ -158,11 +158,20 @@ def run(
     scratch_iterations = np.mean([s.num_iterations for _, _, s in rows])
     restarts = sum(w.initialization == RESTART for _, w, _ in rows[1:])
     composed = sum(w.termination == COMPOSED for _, w, _ in rows[1:])
+    from_decisions = sum(
+        any(DECISIONS_AS_START in reuse for reuse in w.reused) for _, w, _ in rows[1:]
+    )
     lines = [
         f"{path.name}: {full.num_nodes} poses streamed in steps of {step} ({len(rows)} optimisations)",
         f"  warm starts:   total {warm_total:.2f} s, {iterations:.1f} iterations per call on average,"
         f" {restarts} of {len(rows) - 1} restarted from chordal (new measurements disagreed),"
-        f" {composed} solved nothing (new poses hanging off the last solution by a tree)",
+        f" {composed} solved nothing (new poses hanging off the last solution by a tree)"
+        + (
+            f", {from_decisions} searched on from GNC's last decisions (with the new"
+            " measurements kept)"
+            if robust is not None
+            else ""
+        ),
         f"  from scratch:  total {scratch_total:.2f} s, {scratch_iterations:.1f} iterations per call"
         f" (the last, on the whole graph: {last_scratch.total_time:.2f} s)",
         f"  ratio warm / scratch: {warm_total / scratch_total:.3f}",
