@@ -169,9 +169,9 @@ def optimize(
     last one carries that run's decisions (``_previous_decisions``). They stand when all that
     was added is new poses hanging off the map by trusted edges (``_standing_decisions``): the
     call composes the new poses as above, or solves over the decisions where the solution does
-    not extend. Otherwise (a new loop, say) they start GNC's search, with the new measurements
-    kept, if least squares over them settles as it is (``posegraph.gnc``); else the whole of
-    GNC runs again.
+    not extend. Otherwise (a new loop, say) least squares over them, with the new measurements
+    kept, replaces GNC's stages where it settles as it is, and competes with them where it does
+    not (``posegraph.gnc``); the local search follows either way.
 
     The graph's values are replaced by the initial ones; the result holds the optimum.
     """
