@@ -320,10 +320,12 @@ def test_identity_information_ignores_or_replaces_the_files(group, suffix, tmp_p
     with pytest.raises(GraphFileError) as raised:
         read_graph(str(stripped))
     first_edge = next(k for k, line in enumerate(lines, 1) if line.startswith("EDGE"))
+    without_information = sum(line.split()[0] in INFORMATION_VALUES for line in lines)
     assert str(raised.value).startswith(f"{stripped}:{first_edge}: ")
     assert str(raised.value).endswith(
         "the line has no information matrix (--identity-information weighs every edge by the"
-        " identity, as TORO's -ic does)"
+        f" identity, as TORO's -ic does) (the first of {without_information} bad lines found;"
+        " --lenient skips them)"
     )
 
 
@@ -492,8 +494,9 @@ def _refused_leniently(path, text: str) -> str:
 
 def test_lenient_mode_skips_sim3_lines_the_graph_would_refuse(tmp_path):
     """A Sim3 pose of negative scale, or of a scale whose inverse's determinant underflows to 0,
-    is refused on its line (strict) or skipped (lenient), as the graph would refuse it. The
-    vertices are checked first; the skipped lines are listed in line order."""
+    is refused on its line (strict) or skipped (lenient), as the graph would refuse it. Strict
+    reading names the earliest (an edge, though vertices are checked first); the skipped lines
+    are listed in line order."""
     path = tmp_path / "scales.g2o"
     information = " ".join(["0"] * 28)
     identity = "0 0 0 1 0 0 0"
@@ -505,10 +508,69 @@ def test_lenient_mode_skips_sim3_lines_the_graph_would_refuse(tmp_path):
     )
     with pytest.raises(GraphFileError) as raised:
         read_graph(str(path))
-    assert raised.value.line == 4 and "determinant 0" in raised.value.message  # vertices first
+    assert raised.value.line == 2 and "determinant -1" in raised.value.message
+    assert raised.value.message.endswith("(the first of 2 bad lines found; --lenient skips them)")
     result = read_graph(str(path), ReadOptions(lenient=True))
     assert [(line, "determinant" in why) for line, why in result.skipped] == [(2, True), (4, True)]
     assert result.graph.node_ids.tolist() == [0, 1] and result.graph.num_edges == 0
+
+
+INFORMATION_SE2 = "1 0 0 1 0 1"
+
+
+@pytest.mark.parametrize(
+    "lines, line, message, count, skipped",
+    [
+        (  # each line's numbers: an edge before a vertex, though vertices are checked first
+            [
+                "VERTEX_SE2 0 0 0 0",
+                "EDGE_SE2 0 2 1 0 0 1 0 0 1 0 -1",
+                "VERTEX_SE2 1 1 0 0",
+                "VERTEX_SE2 2 1 0 nan",
+                f"EDGE_SE2 1 2 1 0 0 {INFORMATION_SE2}",
+            ],
+            2,
+            "EDGE_SE2: information matrix is not positive semi-definite (λ_min = -1)",
+            2,  # line 5 refers to the bad vertex: a later stage, which strict reading stops before
+            [2, 4, 5],
+        ),
+        (  # what lines refer to: an edge to a missing node before a vertex defined again
+            [
+                "VERTEX_SE2 0 0 0 0",
+                f"EDGE_SE2 0 5 1 0 0 {INFORMATION_SE2}",
+                "VERTEX_SE2 1 1 0 0",
+                "VERTEX_SE2 1 1 0 0",
+                f"EDGE_SE2 0 1 1 0 0 {INFORMATION_SE2}",
+            ],
+            2,
+            "EDGE_SE2: refers to node 5, which has no vertex line",
+            2,
+            [2, 4],
+        ),
+        (  # the tags come first: an unknown tag after a bad number
+            ["VERTEX_SE2 0 0 0 0", "VERTEX_SE2 1 1 0 inf", "ROBOTLASER1 1 2 3"],
+            3,
+            "unknown tag 'ROBOTLASER1' (--lenient skips lines it cannot read)",
+            1,
+            [2, 3],
+        ),
+    ],
+    ids=["numbers", "references", "tags"],
+)
+def test_strict_reading_names_the_earliest_bad_line_of_the_first_failing_stage(
+    tmp_path, lines, line, message, count, skipped
+):
+    """Strict reading runs a stage's checks to the end, then names its earliest bad line and
+    how many it found; lenient reading skips every bad line of every stage."""
+    path = tmp_path / "several.g2o"
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(GraphFileError) as raised:
+        read_graph(str(path))
+    more = f" (the first of {count} bad lines found; --lenient skips them)" if count > 1 else ""
+    assert (raised.value.line, raised.value.message) == (line, message + more)
+    assert [number for number, _ in read_graph(str(path), ReadOptions(lenient=True)).skipped] == (
+        skipped
+    )
 
 
 def test_writes_are_atomic_and_leave_no_temporary_files(tmp_path):

@@ -2,8 +2,9 @@
 
 A file is split into lines of ``TAG number number …``. Lines of one tag are converted to a float
 array in one call of numpy's C reader; only when that fails are they tokenised and the offending
-line searched for. Every check is vectorised and reports the first bad line as
-``file:line: message``. In lenient mode a bad line is skipped and recorded instead.
+line searched for. Every check is vectorised. A bad line is recorded and left out; in lenient
+mode it stays skipped, and in strict mode the reader raises, once a stage's checks are done
+(``LineChecker.raise_first``), for the earliest bad line, as ``file:line: message``.
 """
 
 from __future__ import annotations
@@ -41,16 +42,30 @@ class Rows:
 
 
 class LineChecker:
-    """Raises on the first bad line (strict) or drops bad lines and records them (lenient)."""
+    """Records bad lines, which the callers leave out. Strict reading raises for the earliest
+    of them when a stage of checks ends (``raise_first``), so that the error names the stage's
+    first bad line in the file, whatever order its checks ran in; lenient reading keeps them
+    as skipped."""
 
     def __init__(self, path: str, lenient: bool) -> None:
         self.path, self.lenient = path, lenient
         self.skipped: list[tuple[int, str]] = []
 
     def fail(self, line: int | None, message: str) -> None:
-        if not self.lenient or line is None:
+        """Record a bad line; a problem of the whole file (``line`` None) raises at once."""
+        if line is None:
             raise GraphFileError(self.path, line, message)
         self.skipped.append((line, message))
+
+    def raise_first(self) -> None:
+        """In strict mode, raise ``GraphFileError`` for the earliest bad line recorded, saying
+        how many were found; in lenient mode, nothing."""
+        if self.lenient or not self.skipped:
+            return
+        line, message = min(self.skipped, key=lambda skipped: skipped[0])
+        count = len({number for number, _ in self.skipped})
+        more = f" (the first of {count} bad lines found; --lenient skips them)" if count > 1 else ""
+        raise GraphFileError(self.path, line, message + more)
 
     def keep_good(self, rows: Rows, bad: np.ndarray, message) -> Rows:
         """Handle the rows where ``bad`` holds; ``message(k)`` describes row k."""

@@ -364,9 +364,12 @@ def _apply_prior_offsets(collected: _Collected, checker: LineChecker) -> None:
 def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
     """Read a g2o or TORO file (told apart by their tags).
 
-    Raises ``GraphFileError`` naming ``file:line`` and the problem. Nodes that appear only in
-    edges are created; when the file has no vertex lines at all, every node is initialised by
-    composing odometry along a spanning tree.
+    Raises ``GraphFileError`` naming ``file:line`` and the problem. The checks run in three
+    stages: the tags, each line's numbers, then what lines refer to (a vertex defined again,
+    an edge to a node without a vertex line). Strict reading stops at the first stage that
+    finds bad lines and names the earliest of them, with how many it found. Nodes that appear
+    only in edges are created; when the file has no vertex lines at all, every node is
+    initialised by composing odometry along a spanning tree.
     """
     path = str(path)
     options = ReadOptions() if options is None else options
@@ -377,6 +380,7 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
             checker.fail(number, f"unknown tag {tag!r}{_unknown_tag_advice(tag, options)}")
             continue
         lines_by_tag.setdefault(tag, []).append((number, text))
+    checker.raise_first()
     if not lines_by_tag:
         found = skipped_report(sorted(checker.skipped)) if checker.skipped else "is the file empty?"
         raise GraphFileError(path, None, f"holds no vertices or edges ({found})")
@@ -414,6 +418,7 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
         if rows is not None:
             _convert(spec, rows, options, checker, collected)
     _apply_prior_offsets(collected, checker)
+    checker.raise_first()
 
     sim3_rows = [
         rows
@@ -426,6 +431,7 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
     if group is Sim3:
         lifted_scale_information = _lift_se3_records(collected, options.scale_information)
     graph, without_vertex = _assemble(group, collected, checker)
+    checker.raise_first()
     tag_counts = Counter()
     for rows, *_ in collected.vertices + collected.edges + collected.priors:
         tag_counts[rows.tag] += len(rows)
