@@ -64,7 +64,7 @@ class LineChecker:
             return
         line, message = min(self.skipped, key=lambda skipped: skipped[0])
         count = len({number for number, _ in self.skipped})
-        more = f" (the first of {count} bad lines found; --lenient skips them)" if count > 1 else ""
+        more = f" (the first of {count} bad lines found)" if count > 1 else ""
         raise GraphFileError(self.path, line, message + more)
 
     def keep_good(self, rows: Rows, bad: np.ndarray, message) -> Rows:
