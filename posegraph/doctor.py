@@ -180,9 +180,10 @@ def diagnose(read: ReadResult) -> Diagnosis:
             )
         )
     if read.nodes_without_vertex.size:
+        read_line = " that was read" if read.skipped else ""
         problems.append(
             Problem(
-                f"{read.nodes_without_vertex.size} node(s) have no vertex line",
+                f"{read.nodes_without_vertex.size} node(s) have no vertex line{read_line}",
                 "the initial error above is of values composed from odometry; optimize (default --init auto) "
                 "starts a graph with loops from chordal relaxation instead",
             )

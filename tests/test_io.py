@@ -10,6 +10,7 @@ import stat
 import numpy as np
 import pytest
 
+from posegraph.doctor import diagnose
 from posegraph.factors import chi2
 from posegraph.graph import PoseGraph
 from posegraph.io import GraphFileError, ReadOptions, read_graph, write_graph
@@ -523,14 +524,15 @@ INFORMATION_SE2 = "1 0 0 1 0 1"
         (  # each line's numbers: an edge before a vertex, though vertices are checked first
             [
                 "VERTEX_SE2 0 0 0 0",
-                "EDGE_SE2 0 2 1 0 0 1 0 0 1 0 -1",
+                f"EDGE_SE2 0 7 1 0 0 {INFORMATION_SE2}",  # what lines refer to: a later stage
                 "VERTEX_SE2 1 1 0 0",
+                "EDGE_SE2 0 2 1 0 0 1 0 0 1 0 -1",
                 "VERTEX_SE2 2 1 0 nan",
-                f"EDGE_SE2 1 2 1 0 0 {INFORMATION_SE2}",
+                f"EDGE_SE2 1 2 1 0 0 {INFORMATION_SE2}",  # keeps node 2: its vertex was skipped
             ],
-            2,
+            4,
             "EDGE_SE2: information matrix is not positive semi-definite (λ_min = -1)",
-            2,  # line 5 refers to the bad vertex: a later stage, which strict reading stops before
+            2,
             [2, 4, 5],
         ),
         (  # what lines refer to: an edge to a missing node before a vertex defined again
@@ -570,6 +572,37 @@ def test_strict_reading_names_the_earliest_bad_line_of_the_first_failing_stage(
     assert [number for number, _ in read_graph(str(path), ReadOptions(lenient=True)).skipped] == (
         skipped
     )
+
+
+def test_lenient_reading_keeps_the_edges_of_a_node_whose_vertex_line_it_skipped(tmp_path):
+    """A bad vertex line costs its value, not its edges: the node stays in its vertex line's
+    place, its value composed from its neighbours. A line that names only that node is
+    skipped, saying why."""
+    path = tmp_path / "bad_vertex.g2o"
+    lines = [
+        "VERTEX_SE2 0 0 0 0",
+        "VERTEX_SE2 1 1 0 nan",
+        "VERTEX_SE2 2 2 0 0",
+        "VERTEX_SE2 3 3 0 0 0",
+        f"EDGE_SE2 0 1 1 0 0 {INFORMATION_SE2}",
+        f"EDGE_SE2 1 2 1 0 0 {INFORMATION_SE2}",
+        f"EDGE_SE2 0 2 2 0 0 {INFORMATION_SE2}",
+        "FIX 3",
+    ]
+    path.write_text("\n".join(lines) + "\n")
+    result = read_graph(str(path), ReadOptions(lenient=True))
+    graph = result.graph
+    assert result.skipped == [
+        (2, "VERTEX_SE2: NaN or infinite value"),
+        (4, "VERTEX_SE2: expected 4 numbers after the tag, found 5"),
+        (8, "FIX: refers to node 3, whose vertex line (line 4) was skipped"),
+    ]
+    assert graph.node_ids.tolist() == [0, 1, 2] and graph.num_edges == 3
+    assert result.nodes_without_vertex.tolist() == [1]
+    np.testing.assert_allclose(graph.values.translation, [[0, 0], [1, 0], [2, 0]], atol=1e-12)
+    np.testing.assert_allclose(graph.values.log()[:, 2], 0, atol=1e-12)
+    problems = [p.what for p in diagnose(result).problems]
+    assert "1 node(s) have no vertex line that was read" in problems
 
 
 def test_writes_are_atomic_and_leave_no_temporary_files(tmp_path):

@@ -89,7 +89,8 @@ class ReadResult:
     skipped: list[tuple[int, str]]
     """(line, reason) of every line skipped in lenient mode, in line order."""
     nodes_without_vertex: np.ndarray
-    """Ids of nodes that had no vertex line, initialised by composing odometry."""
+    """Ids of nodes that had no vertex line (or only ones that lenient reading skipped), their
+    values composed along a spanning tree from the nodes that have values."""
     sim3_dialect: str | None
     """"a" (element) or "b" (log of the inverse) for Sim3 files."""
     lifted_scale_information: float | None = None
@@ -430,7 +431,8 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
     lifted_scale_information = None
     if group is Sim3:
         lifted_scale_information = _lift_se3_records(collected, options.scale_information)
-    graph, without_vertex = _assemble(group, collected, checker)
+    skipped_vertices = _skipped_vertex_lines(lines_by_tag, checker)
+    graph, without_vertex = _assemble(group, collected, checker, skipped_vertices)
     checker.raise_first()
     tag_counts = Counter()
     for rows, *_ in collected.vertices + collected.edges + collected.priors:
@@ -469,9 +471,37 @@ def _unknown_tag_advice(tag: str, options: ReadOptions) -> str:
     return ": a line of numbers, as in a TUM or KITTI trajectory, not a g2o or TORO graph"
 
 
-def _assemble(group, collected: _Collected, checker: LineChecker):
-    graph = PoseGraph(group)
-    vertex_ids = np.zeros(0, dtype=np.int64)
+def _skipped_vertex_lines(lines_by_tag: dict[str, list], checker: LineChecker) -> dict[int, int]:
+    """Node id → number of its first vertex line that lenient reading skipped (ids that are
+    not integers from 0 to 2⁶³ − 1 left out)."""
+    if not checker.skipped:
+        return {}
+    skipped = {line for line, _ in checker.skipped}
+    found: dict[int, int] = {}
+    for tag, entries in lines_by_tag.items():
+        if ALL_TAGS[tag].kind != "vertex":
+            continue
+        for number, text in entries:
+            if number in skipped:
+                try:
+                    node = int(text.split(None, 1)[0])
+                except (ValueError, IndexError):
+                    continue
+                if 0 <= node < 2**63:
+                    found.setdefault(node, number)
+    return found
+
+
+def _assemble(group, collected: _Collected, checker: LineChecker, skipped_vertices: dict):
+    """The graph of the lines collected, and the ids of its nodes without a vertex value.
+
+    Edges and priors may name nodes without a vertex line only in a file that has none; then
+    every node's value is composed along a spanning tree and aligned to the priors. A node
+    whose vertex line lenient reading skipped (``skipped_vertices``) keeps its edges, and its
+    value is composed from the nodes that have values.
+    """
+    vertex_ids, vertex_lines = np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    values = group.identity((0,))
     if collected.vertices:
         rows = [r for r, _ in collected.vertices]
         vertex_ids = np.concatenate([r.ids(0) for r in rows])
@@ -487,40 +517,54 @@ def _assemble(group, collected: _Collected, checker: LineChecker):
             checker.fail(
                 int(lines[k]), f"vertex {vertex_ids[k]} is defined again (first on line {original})"
             )
-        vertex_ids, values = vertex_ids[~duplicate], values[~duplicate]
-        graph.add_nodes(vertex_ids, values)
+        kept = ~duplicate
+        vertex_ids, vertex_lines, values = vertex_ids[kept], lines[kept], values[kept]
 
+    salvaged = np.setdiff1d(np.fromiter(skipped_vertices, np.int64), vertex_ids)
+    known_ids = np.concatenate([vertex_ids, salvaged])
+    check = bool(collected.vertices)
     edges = []
     for rows, measurements, information in collected.edges:
-        kept = _filter_known(rows, (0, 1), vertex_ids, bool(collected.vertices), checker)
+        kept = _filter_known(rows, (0, 1), known_ids, check, checker, skipped_vertices)
         edges.append((rows.ids(0)[kept], rows.ids(1)[kept], measurements[kept], information[kept]))
     priors = []
     for rows, measurements, information in collected.priors:
-        kept = _filter_known(rows, (0,), vertex_ids, bool(collected.vertices), checker)
+        kept = _filter_known(rows, (0,), known_ids, check, checker, skipped_vertices)
         priors.append((rows.ids(0)[kept], measurements[kept], information[kept]))
 
-    without_vertex = np.zeros(0, dtype=np.int64)
-    if not collected.vertices:
-        endpoints = [e[0] for e in edges] + [e[1] for e in edges] + [p[0] for p in priors]
-        without_vertex = np.unique(np.concatenate(endpoints)) if endpoints else without_vertex
-        graph.add_nodes(without_vertex, group.identity(without_vertex.shape))
+    endpoints = [e[0] for e in edges] + [e[1] for e in edges] + [p[0] for p in priors]
+    without_vertex = np.unique(np.concatenate(endpoints)) if endpoints else np.zeros(0, np.int64)
+    if collected.vertices:
+        without_vertex = without_vertex[np.isin(without_vertex, salvaged)]
+    # Nodes in vertex order, a skipped vertex line's node in its line's place.
+    lines = np.array([skipped_vertices.get(node, 0) for node in without_vertex.tolist()], np.int64)
+    order = np.argsort(np.concatenate([vertex_lines, lines]), kind="stable")
+    node_ids = np.concatenate([vertex_ids, without_vertex])[order]
+    graph = PoseGraph(group)
+    graph.add_nodes(
+        node_ids, group.concatenate([values, group.identity(without_vertex.shape)])[order]
+    )
     for i, j, measurements, information in edges:
         graph.add_edges(i, j, measurements, information)
     for i, measurements, information in priors:
         graph.add_priors(i, measurements, information)
     for rows in collected.fixes:
-        kept = _filter_known(rows, (0,), graph.node_ids, True, checker)
+        kept = _filter_known(rows, (0,), graph.node_ids, True, checker, skipped_vertices)
         graph.fix(rows.ids(0)[kept])
     for rows in collected.equivalences:
-        kept = _filter_known(rows, (0, 1), graph.node_ids, True, checker)
+        kept = _filter_known(rows, (0, 1), graph.node_ids, True, checker, skipped_vertices)
         pairs = np.stack([rows.ids(0)[kept], rows.ids(1)[kept]], axis=1)
         graph.equivalences = np.concatenate([graph.equivalences, pairs])
     if without_vertex.size:
-        graph.set_values(align_to_priors(graph, spanning_tree_values(graph)))
+        known = ~np.isin(graph.node_ids, without_vertex)
+        values = spanning_tree_values(graph, known)
+        graph.set_values(values if known.any() else align_to_priors(graph, values))
     return graph, without_vertex
 
 
-def _filter_known(rows: Rows, columns, known_ids: np.ndarray, check: bool, checker) -> np.ndarray:
+def _filter_known(
+    rows: Rows, columns, known_ids: np.ndarray, check: bool, checker, skipped_vertices: dict
+) -> np.ndarray:
     """Mask of rows whose ids in ``columns`` are known nodes; the others are reported."""
     keep = np.ones(len(rows), dtype=bool)
     if not check:
@@ -529,9 +573,12 @@ def _filter_known(rows: Rows, columns, known_ids: np.ndarray, check: bool, check
         ids = rows.ids(column)
         unknown = keep & ~np.isin(ids, known_ids)
         for k in np.flatnonzero(unknown):
-            checker.fail(
-                int(rows.line_numbers[k]),
-                f"{rows.tag}: refers to node {ids[k]}, which has no vertex line",
+            node = int(ids[k])
+            why = (
+                f"whose vertex line (line {skipped_vertices[node]}) was skipped"
+                if node in skipped_vertices
+                else "which has no vertex line"
             )
+            checker.fail(int(rows.line_numbers[k]), f"{rows.tag}: refers to node {node}, {why}")
         keep &= ~unknown
     return keep
