@@ -8,6 +8,7 @@ the traceback instead.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 import traceback
@@ -238,15 +239,33 @@ def main(argv: list[str] | None = None) -> int:
     except (posegraph.GraphFileError, UsageError, ValueError, OSError) as error:
         if args.debug:
             traceback.print_exc()
-        report(str(error) if not isinstance(error, OSError) else _os_message(error))
-        return EXIT_BAD_INPUT
+        message = str(error) if not isinstance(error, OSError) else _os_message(error)
+        return _stop(args, EXIT_BAD_INPUT, message, error)
     except Exception as error:  # noqa: BLE001 - the one place that turns crashes into a line
         if args.debug:
             traceback.print_exc()
-        else:
-            first_line = (str(error).splitlines() or [""])[0][:300]
-            report(f"internal error: {type(error).__name__}: {first_line} (rerun with --debug)")
-        return EXIT_INTERNAL
+        first_line = (str(error).splitlines() or [""])[0][:300]
+        message = f"internal error: {type(error).__name__}: {first_line} (rerun with --debug)"
+        return _stop(args, EXIT_INTERNAL, message, error)
+
+
+def _stop(args: argparse.Namespace, exit_code: int, message: str, error: Exception) -> int:
+    """Report why the command stopped as one line on stderr (unless ``--debug`` printed the
+    traceback of an internal error) and, with ``--json``, as the document ``schema.ERROR`` on
+    stdout, so that a script reading stdout is told too. Returns ``exit_code``."""
+    if exit_code == EXIT_BAD_INPUT or not args.debug:
+        report(message)
+    if args.json:
+        path, line = None, None
+        if isinstance(error, posegraph.GraphFileError):
+            path, line = error.path, error.line
+        elif isinstance(error, OSError):
+            path = error.filename
+        kind = "bad_input" if exit_code == EXIT_BAD_INPUT else "internal"
+        where = {"path": None if path is None else str(path), "line": line}
+        document = {"kind": kind, "exit_code": exit_code, "message": message, **where}
+        print(json.dumps({"command": args.command, "error": document}, indent=2))
+    return exit_code
 
 
 def _os_message(error: OSError) -> str:

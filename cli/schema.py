@@ -96,6 +96,27 @@ SUMMARY = {
     },
 }
 
+ERROR = {
+    "type": "object",
+    "required": ["command", "error"],
+    "properties": {
+        "command": {"type": "string"},
+        "error": {
+            "type": "object",
+            "required": ["kind", "exit_code", "message", "path", "line"],
+            "properties": {
+                "kind": {"enum": ["bad_input", "internal"]},
+                "exit_code": {"enum": [2, 3]},
+                "message": {"type": "string"},
+                "path": _PATH_OR_NULL,
+                "line": {"type": ["integer", "null"], "minimum": 1},
+            },
+        },
+    },
+}
+"""What ``--json`` prints instead when a command stops on bad input or an internal error:
+``message`` is the line on stderr; ``path`` and ``line`` name the file and line at fault."""
+
 SCHEMAS = {
     "scale-drift": {
         "type": "object",

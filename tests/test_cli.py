@@ -735,6 +735,46 @@ def test_an_internal_error_is_one_line(monkeypatch, capsys):
     )
 
 
+def test_with_json_a_stop_is_a_document_on_stdout_too(tmp_path, monkeypatch, capsys):
+    """A script that reads stdout learns why a command stopped: the stderr line, the exit code,
+    and the file and line at fault, where there is one."""
+    from posegraph_cli import commands, main
+    from posegraph_cli.schema import ERROR
+
+    bad = tmp_path / "bad.g2o"
+    bad.write_text("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0 0\n")
+    unreadable = tmp_path / "folder.g2o"
+    unreadable.mkdir()
+
+    def crash(args):
+        raise RuntimeError("first line")
+
+    cases = [
+        (["info", str(bad)], "bad_input", 2, str(bad), 2),
+        (["optimize", str(unreadable)], "bad_input", 2, str(unreadable), None),
+        (["optimize", EXAMPLE, "-o", EXAMPLE], "bad_input", 2, None, None),
+        (["plot", EXAMPLE, "-o", str(tmp_path / "no" / "f.png")], "bad_input", 2, None, None),
+        (["convert", EXAMPLE, str(tmp_path / "poses.tum")], "internal", 3, None, None),
+    ]
+    monkeypatch.setattr(commands, "convert", crash)
+    for args, kind, exit_code, path, line in cases:
+        assert main.main([*args, "--json"]) == exit_code, args
+        captured = capsys.readouterr()
+        document = json.loads(captured.out)
+        jsonschema.validate(document, ERROR)
+        error = document["error"]
+        assert document["command"] == args[0], args
+        assert (error["kind"], error["exit_code"], error["path"], error["line"]) == (
+            kind,
+            exit_code,
+            path,
+            line,
+        ), args
+        assert captured.err == f"posegraph: error: {error['message']}\n", args
+        main.main(args)
+        assert capsys.readouterr().out == "", args  # without --json, nothing on stdout
+
+
 @pytest.mark.parametrize("name, content, line, words", MALFORMED, ids=[m[0] for m in MALFORMED])
 def test_malformed_input_gives_one_line_and_exit_2(tmp_path, name, content, line, words):
     path = write_case(tmp_path, name, content)
