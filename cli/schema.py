@@ -250,6 +250,7 @@ SCHEMAS = {
             "ate",
             "rpe_translation",
             "rpe_rotation_deg",
+            "planar_ate_floor",
             "skipped_lines",
         ],
         "properties": {
@@ -263,6 +264,7 @@ SCHEMAS = {
             "ate": _STATS,
             "rpe_translation": _STATS,
             "rpe_rotation_deg": _STATS,
+            "planar_ate_floor": _NUMBER,
         },
     },
 }

@@ -221,12 +221,16 @@ def format_evaluation(e: Evaluation) -> str:
             f"median {stats.median:.6g}  max {stats.max:.6g}"
         )
 
-    return "\n".join(
-        [
-            f"matched {e.matched} of {e.estimate_poses} poses (keys within {e.max_difference:g}); "
-            f"alignment {e.alignment} (scale {float(e.alignment_transform.scale):.6g})",
-            row("ATE", e.ate, ""),
-            row("RPE translation", e.rpe_translation, ""),
-            row("RPE rotation", e.rpe_rotation_deg, "°"),
-        ]
-    )
+    lines = [
+        f"matched {e.matched} of {e.estimate_poses} poses (keys within {e.max_difference:g}); "
+        f"alignment {e.alignment} (scale {float(e.alignment_transform.scale):.6g})",
+        row("ATE", e.ate, ""),
+        row("RPE translation", e.rpe_translation, ""),
+        row("RPE rotation", e.rpe_rotation_deg, "°"),
+    ]
+    if e.planar_ate_floor is not None:
+        lines.append(
+            f"  {'ATE floor':<16} rmse {e.planar_ate_floor:.6g}  (the estimate is planar: the"
+            " ground truth's RMS distance from its plane, below which no planar ATE can go)"
+        )
+    return "\n".join(lines)

@@ -8,6 +8,9 @@ benchmark; Zhang & Scaramuzza 2018, "A Tutorial on Quantitative Trajectory Evalu
 * Poses are paired by key: a TUM file's time stamps, a graph's node ids, a KITTI file's line
   numbers. Time stamps of two sensors rarely agree, so a pair may differ by up to
   ``max_difference`` (``MAX_KEY_DIFFERENCE``, as the benchmark's ``associate.py``).
+* A planar estimate (a 2D graph, lifted to z = 0) cannot follow a ground truth that leaves its
+  plane: whatever the alignment, its ATE RMSE is at least the ground truth's RMS distance from
+  its least-squares plane, which is reported.
 """
 
 from __future__ import annotations
@@ -58,6 +61,9 @@ class Evaluation:
     estimate_poses: int
     max_difference: float
     aligned_estimate: SE3
+    planar_ate_floor: float | None
+    """When the estimate is planar and the ground truth is not (``planar_ate_floor``), the
+    lowest ATE RMSE that a planar estimate can reach; else None."""
 
     def as_dict(self) -> dict:
         return {
@@ -69,6 +75,7 @@ class Evaluation:
             "ate": dataclasses.asdict(self.ate),
             "rpe_translation": dataclasses.asdict(self.rpe_translation),
             "rpe_rotation_deg": dataclasses.asdict(self.rpe_rotation_deg),
+            "planar_ate_floor": self.planar_ate_floor,
         }
 
 
@@ -154,4 +161,32 @@ def evaluate(
         len(estimate.keys),
         max_difference,
         aligned,
+        planar_ate_floor(est.translation, gt.translation),
     )
+
+
+PLANAR_TOLERANCE = 1e-9
+"""Points lie in a plane when the smallest singular value of their centred coordinates is at
+most this times the largest."""
+
+
+def planar_ate_floor(estimate_positions: np.ndarray, truth_positions: np.ndarray) -> float | None:
+    """The RMS distance of ``truth_positions`` (n × 3) from their least-squares plane, when
+    ``estimate_positions`` lie in a plane and they do not; else None.
+
+    Any rigid or similarity transform keeps the estimate in some plane P, and
+    Σₖ ‖gₖ − eₖ‖² ≥ Σₖ dist(gₖ, P)² ≥ σ₃², the smallest singular value of the centred gₖ
+    squared (the least-squares plane's sum of squared distances), so σ₃ / √n bounds the ATE
+    RMSE from below, under any alignment.
+    """
+
+    def singular_values(points: np.ndarray) -> np.ndarray:
+        return np.linalg.svd(points - points.mean(axis=0), compute_uv=False)
+
+    def planar(singular: np.ndarray) -> bool:
+        return bool(singular[2] <= PLANAR_TOLERANCE * singular[0])
+
+    truth_singular = singular_values(truth_positions)
+    if not planar(singular_values(estimate_positions)) or planar(truth_singular):
+        return None
+    return float(truth_singular[2] / np.sqrt(len(truth_positions)))

@@ -640,6 +640,7 @@ def test_eval_reports_ate_and_rpe(tmp_path):
     assert sim3["ate"]["rmse"] <= after["ate"]["rmse"] + 1e-12
     text = run("eval", optimised, truth_path).stdout
     assert "ATE" in text and "RPE" in text
+    assert after["planar_ate_floor"] is None and "floor" not in text
     too_far = run("eval", optimised, truth_path, "--delta", 160, check_exit=2)
     assert (
         f"posegraph: error: {optimised} against {truth_path}: the RPE step is 1 to 159 poses (of"
@@ -651,6 +652,26 @@ def test_eval_reports_ate_and_rpe(tmp_path):
     assert unpaired.stderr.startswith(
         f"posegraph: error: {optimised} against {truncated}: only 2 poses pair"
     ), unpaired.stderr
+
+
+def test_eval_of_a_2d_estimate_against_3d_ground_truth_gives_the_planar_floor(tmp_path):
+    """A 2D graph is lifted to z = 0; ground truth that leaves its plane (here by ±5 cm)
+    puts a floor under the ATE, which eval reports."""
+    from posegraph.io import read_graph
+    from posegraph.trajectory_io import Trajectory, write_trajectory
+
+    graph = read_graph(EXAMPLE_2D).graph
+    lifted = Trajectory.of_graph(graph)
+    bumps = 0.05 * (-1.0) ** np.arange(graph.num_nodes)
+    truth = type(lifted.poses)(lifted.poses.rotation, lifted.positions + bumps[:, None] * [0, 0, 1])
+    truth_path = tmp_path / "truth3d.tum"
+    write_trajectory(Trajectory(lifted.keys, truth), str(truth_path), "tum")
+    document = run_json("eval", EXAMPLE_2D, truth_path)
+    assert 0.04 < document["planar_ate_floor"] <= document["ate"]["rmse"]
+    text = run("eval", EXAMPLE_2D, truth_path).stdout
+    assert (
+        f"ATE floor        rmse {document['planar_ate_floor']:.6g}  (the estimate is planar" in text
+    )
 
 
 def test_numbers_that_overflow_are_reported_and_nothing_is_written(tmp_path):

@@ -101,3 +101,40 @@ def test_a_scaled_alignment_refuses_a_trajectory_that_stays_at_one_point():
         spread = moving.poses.translation - moving.poses.translation.mean(axis=0)
         rigid = evaluate(estimate, truth, alignment="se3")
         assert rigid.ate.rmse == pytest.approx(np.sqrt(np.mean(np.sum(spread**2, axis=1))))
+
+
+def _planar(positions_xy: np.ndarray, tilt: SE3 | None = None) -> np.ndarray:
+    positions = np.column_stack([positions_xy, np.zeros(len(positions_xy))])
+    return positions if tilt is None else tilt.act(positions)
+
+
+def test_a_planar_estimate_is_told_the_ate_it_cannot_go_below():
+    """Ground truth at the corners (±1, ±1) lifted by ±h (z = h·x·y): its least-squares plane
+    is z = 0 and its RMS distance from it h, which a planar estimate on the corners reaches."""
+    h = 0.1
+    corners = np.array([[1.0, 1.0], [1.0, -1.0], [-1.0, 1.0], [-1.0, -1.0]])
+    truth_positions = np.column_stack([corners, h * corners[:, 0] * corners[:, 1]])
+    rotations = np.broadcast_to(np.eye(3), (4, 3, 3))
+    keys = np.arange(4.0)
+    truth = Trajectory(keys, SE3(rotations, truth_positions))
+    estimate = Trajectory(keys, SE3(rotations, _planar(corners)))
+    for alignment in ("se3", "sim3", "none"):
+        evaluation = evaluate(estimate, truth, alignment)
+        assert evaluation.planar_ate_floor == pytest.approx(h, rel=1e-12)
+        assert evaluation.ate.rmse == pytest.approx(h, rel=1e-9)
+
+
+def test_no_alignment_takes_a_planar_estimate_below_the_floor():
+    rng = np.random.default_rng(7)
+    keys = np.arange(40.0)
+    tilt = SE3.sample(rng)
+    truth = Trajectory(keys, SE3.sample(rng, (40,)))
+    planar_poses = SE3.sample(rng, (40,))
+    planar_poses = SE3(planar_poses.rotation, _planar(rng.normal(size=(40, 2)) * 5, tilt))
+    estimate = Trajectory(keys, planar_poses)
+    for alignment in ("se3", "sim3", "none"):
+        evaluation = evaluate(estimate, truth, alignment)
+        assert 0 < evaluation.planar_ate_floor <= evaluation.ate.rmse, alignment
+    assert evaluate(truth, estimate).planar_ate_floor is None  # the estimate is not planar
+    tilted_truth = Trajectory(keys, SE3(truth.poses.rotation, _planar(rng.normal(size=(40, 2)))))
+    assert evaluate(estimate, tilted_truth).planar_ate_floor is None  # both planar
