@@ -534,7 +534,7 @@ def _assemble(group, collected: _Collected, checker: LineChecker, skipped_vertic
 
     endpoints = [e[0] for e in edges] + [e[1] for e in edges] + [p[0] for p in priors]
     without_vertex = np.unique(np.concatenate(endpoints)) if endpoints else np.zeros(0, np.int64)
-    if collected.vertices:
+    if check:
         without_vertex = without_vertex[np.isin(without_vertex, salvaged)]
     # Nodes in vertex order, a skipped vertex line's node in its line's place.
     lines = np.array([skipped_vertices.get(node, 0) for node in without_vertex.tolist()], np.int64)
