@@ -9,7 +9,9 @@ import stat
 
 import numpy as np
 import pytest
+from posegraph_datasets import example
 
+import posegraph
 from posegraph.doctor import diagnose
 from posegraph.factors import chi2
 from posegraph.graph import PoseGraph
@@ -603,6 +605,24 @@ def test_lenient_reading_keeps_the_edges_of_a_node_whose_vertex_line_it_skipped(
     np.testing.assert_allclose(graph.values.log()[:, 2], 0, atol=1e-12)
     problems = [p.what for p in diagnose(result).problems]
     assert "1 node(s) have no vertex line that was read" in problems
+
+
+def test_a_skipped_vertex_line_leaves_the_optimum_unchanged(tmp_path):
+    """A vertex line holds only a starting value: with one spoilt, lenient reading keeps every
+    measurement, so the bundled example optimises to the same error (chordal start) as when
+    clean."""
+    lines = example("manhattan_small.g2o").read_text().splitlines()
+    spoilt = next(k for k, line in enumerate(lines) if line.startswith("VERTEX_SE2 200 "))
+    lines[spoilt] += " 0"
+    path = tmp_path / "spoilt.g2o"
+    path.write_text("\n".join(lines) + "\n")
+    clean = read_graph(str(example("manhattan_small.g2o"))).graph
+    read = read_graph(str(path), ReadOptions(lenient=True))
+    assert [line for line, _ in read.skipped] == [spoilt + 1]
+    assert read.graph.node_ids.tolist() == clean.node_ids.tolist()
+    assert read.graph.num_edges == clean.num_edges
+    final = posegraph.optimize(read.graph).summary.final_error
+    assert final == pytest.approx(posegraph.optimize(clean).summary.final_error, rel=1e-9)
 
 
 def test_writes_are_atomic_and_leave_no_temporary_files(tmp_path):
