@@ -606,6 +606,18 @@ def test_lenient_reading_keeps_the_edges_of_a_node_whose_vertex_line_it_skipped(
     problems = [p.what for p in diagnose(result).problems]
     assert "1 node(s) have no vertex line that was read" in problems
 
+    # With every vertex line skipped, the file reads as one without them: nodes by id.
+    lines = [
+        "VERTEX_SE2 1 0 0 nan",
+        "VERTEX_SE2 0 1 0 0 0",
+        f"EDGE_SE2 0 1 1 0 0 {INFORMATION_SE2}",
+        f"EDGE_SE2 1 2 1 0 0 {INFORMATION_SE2}",
+    ]
+    path.write_text("\n".join(lines) + "\n")
+    result = read_graph(str(path), ReadOptions(lenient=True))
+    assert result.graph.node_ids.tolist() == result.nodes_without_vertex.tolist() == [0, 1, 2]
+    np.testing.assert_allclose(result.graph.values.translation, [[0, 0], [1, 0], [2, 0]])
+
 
 def test_a_skipped_vertex_line_leaves_the_optimum_unchanged(tmp_path):
     """A vertex line holds only a starting value: with one spoilt, lenient reading keeps every

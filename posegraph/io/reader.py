@@ -536,9 +536,11 @@ def _assemble(group, collected: _Collected, checker: LineChecker, skipped_vertic
     without_vertex = np.unique(np.concatenate(endpoints)) if endpoints else np.zeros(0, np.int64)
     if check:
         without_vertex = without_vertex[np.isin(without_vertex, salvaged)]
-    # Nodes in vertex order, a skipped vertex line's node in its line's place.
-    lines = np.array([skipped_vertices.get(node, 0) for node in without_vertex.tolist()], np.int64)
-    order = np.argsort(np.concatenate([vertex_lines, lines]), kind="stable")
+    # Nodes in vertex order, a skipped vertex line's node in its line's place; by id without.
+    order = np.arange(without_vertex.size)
+    if check:
+        lines = np.array([skipped_vertices[node] for node in without_vertex.tolist()], np.int64)
+        order = np.argsort(np.concatenate([vertex_lines, lines]), kind="stable")
     node_ids = np.concatenate([vertex_ids, without_vertex])[order]
     graph = PoseGraph(group)
     graph.add_nodes(
