@@ -91,7 +91,7 @@ def _emit(args: argparse.Namespace, record: dict, text: str) -> None:
 def _refuse_to_overwrite(source: str, target: str | None, allowed: bool) -> None:
     if target and not allowed and os.path.exists(target) and os.path.samefile(source, target):
         raise UsageError(
-            f"refusing to overwrite the input file {source}; pass --overwrite to allow it"
+            "refusing to overwrite the input file; pass --overwrite to allow it", source
         )
 
 
@@ -111,9 +111,9 @@ def _check_output(
         output_format(path, to)
     folder = os.path.dirname(path) or "."
     if not os.path.isdir(folder):
-        raise UsageError(f"{path}: cannot write: there is no folder {folder}")
+        raise UsageError(f"cannot write: there is no folder {folder}", path)
     if os.path.isdir(path):
-        raise UsageError(f"{path}: is a folder, not a file")
+        raise UsageError("is a folder, not a file", path)
     check_replaceable(path)
 
 
@@ -128,16 +128,19 @@ def _check_writable(
     cannot be written to ``path`` as ``to`` (``posegraph.conversion.unwritable_to``)."""
     reason = None if path is None else unwritable_to(graph, path, to, group)
     if reason is not None:
-        raise UsageError(f"{source}: {reason}")
+        raise UsageError(reason, source)
 
 
 @contextlib.contextmanager
-def _about(subject: str) -> Iterator[None]:
-    """Report a library ``ValueError`` as one line that starts with ``subject`` (the input)."""
+def _about(*paths: str) -> Iterator[None]:
+    """Report a library ``ValueError`` as one line that starts with the input's path (or
+    "A against B" for two)."""
     try:
         yield
     except ValueError as error:
-        raise UsageError(f"{subject}: {error}") from None
+        if len(paths) == 1:
+            raise UsageError(str(error), paths[0]) from None
+        raise UsageError(f"{' against '.join(paths)}: {error}") from None
 
 
 def optimize(args: argparse.Namespace) -> int:
@@ -163,9 +166,10 @@ def optimize(args: argparse.Namespace) -> int:
     _note_interruption(progress, summary)
     if not math.isfinite(summary.final_error):
         raise UsageError(
-            f"{args.input}: the optimisation ended with error {summary.final_error} (at the file's "
-            f"values: {summary.input_error}); numbers this large overflow in double precision. "
-            "Nothing written"
+            f"the optimisation ended with error {summary.final_error} (at the file's values: "
+            f"{summary.input_error}); numbers this large overflow in double precision. Nothing "
+            "written",
+            args.input,
         )
     graph.set_values(result.values)
     covariances = _covariances(args.input, graph) if args.covariances else None
@@ -232,7 +236,7 @@ def _covariances(source: str, graph: posegraph.PoseGraph) -> np.ndarray:
         return posegraph.marginals(graph, graph.node_ids, require_measured=True)
     except NotPositiveDefinite as error:
         raise UsageError(
-            f"{source}: {error}. Nothing written (without --covariances, the optimised graph is)"
+            f"{error}. Nothing written (without --covariances, the optimised graph is)", source
         ) from None
 
 
@@ -291,7 +295,7 @@ def eval(args: argparse.Namespace) -> int:  # noqa: A001 - the subcommand's name
     inputs = _Inputs(args)
     estimate = inputs.trajectory(args.estimate)
     truth = inputs.trajectory(args.ground_truth)
-    with _about(f"{args.estimate} against {args.ground_truth}"):  # they do not pair, say
+    with _about(args.estimate, args.ground_truth):  # they do not pair, say
         evaluation = evaluate(estimate, truth, args.align, args.delta, args.max_time_difference)
     if args.plot:
         from posegraph.plotting import plot_trajectories

@@ -10,7 +10,12 @@ EXIT_BAD_INPUT = 2
 
 
 class UsageError(Exception):
-    """Bad arguments or a refused action; reported as one line, exit code 2."""
+    """Bad arguments or a refused action; reported as one line, exit code 2, that starts
+    with ``path`` when it is about one file."""
+
+    def __init__(self, message: str, path: str | None = None) -> None:
+        self.path, self.message = path, message
+        super().__init__(f"{path}: {message}" if path else message)
 
 
 def report(message: str) -> None:

@@ -259,6 +259,8 @@ def _stop(args: argparse.Namespace, exit_code: int, message: str, error: Excepti
         path, line = None, None
         if isinstance(error, posegraph.GraphFileError):
             path, line = error.path, error.line
+        elif isinstance(error, UsageError):
+            path = error.path
         elif isinstance(error, OSError):
             path = error.filename
         kind = "bad_input" if exit_code == EXIT_BAD_INPUT else "internal"

@@ -766,6 +766,9 @@ def test_with_json_a_stop_is_a_document_on_stdout_too(tmp_path, monkeypatch, cap
     bad.write_text("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0 0\n")
     unreadable = tmp_path / "folder.g2o"
     unreadable.mkdir()
+    folder = tmp_path / "folder.png"
+    folder.mkdir()
+    nowhere = tmp_path / "no" / "f.png"
 
     def crash(args):
         raise RuntimeError("first line")
@@ -773,8 +776,10 @@ def test_with_json_a_stop_is_a_document_on_stdout_too(tmp_path, monkeypatch, cap
     cases = [
         (["info", str(bad)], "bad_input", 2, str(bad), 2),
         (["optimize", str(unreadable)], "bad_input", 2, str(unreadable), None),
-        (["optimize", EXAMPLE, "-o", EXAMPLE], "bad_input", 2, None, None),
-        (["plot", EXAMPLE, "-o", str(tmp_path / "no" / "f.png")], "bad_input", 2, None, None),
+        (["optimize", EXAMPLE, "-o", EXAMPLE], "bad_input", 2, EXAMPLE, None),
+        (["plot", EXAMPLE, "-o", str(nowhere)], "bad_input", 2, str(nowhere), None),
+        (["eval", EXAMPLE, EXAMPLE, "--plot", str(folder)], "bad_input", 2, str(folder), None),
+        (["eval", EXAMPLE, str(bad)], "bad_input", 2, str(bad), 2),
         (["convert", EXAMPLE, str(tmp_path / "poses.tum")], "internal", 3, None, None),
     ]
     monkeypatch.setattr(commands, "convert", crash)
