@@ -263,9 +263,13 @@ def _stop(args: argparse.Namespace, exit_code: int, message: str, error: Excepti
             path = error.path
         elif isinstance(error, OSError):
             path = error.filename
-        kind = "bad_input" if exit_code == EXIT_BAD_INPUT else "internal"
-        where = {"path": None if path is None else str(path), "line": line}
-        document = {"kind": kind, "exit_code": exit_code, "message": message, **where}
+        document = {
+            "kind": "bad_input" if exit_code == EXIT_BAD_INPUT else "internal",
+            "exit_code": exit_code,
+            "message": message,
+            "path": None if path is None else str(path),
+            "line": line,
+        }
         print(json.dumps({"command": args.command, "error": document}, indent=2))
     return exit_code
 

@@ -539,8 +539,8 @@ def _assemble(group, collected: _Collected, checker: LineChecker, skipped_vertic
     # Nodes in vertex order, a skipped vertex line's node in its line's place; by id without.
     order = np.arange(without_vertex.size)
     if check:
-        lines = np.array([skipped_vertices[node] for node in without_vertex.tolist()], np.int64)
-        order = np.argsort(np.concatenate([vertex_lines, lines]), kind="stable")
+        skipped_lines = [skipped_vertices[node] for node in without_vertex.tolist()]
+        order = np.argsort(np.concatenate([vertex_lines, skipped_lines]), kind="stable")
     node_ids = np.concatenate([vertex_ids, without_vertex])[order]
     graph = PoseGraph(group)
     graph.add_nodes(
