@@ -13,8 +13,8 @@ from collections.abc import Iterator
 import numpy as np
 
 import posegraph
+from posegraph.conversion import GRAPH_FORMATS, load_trajectory, output_format, unwritable_to
 from posegraph.conversion import convert as convert_graph
-from posegraph.conversion import load_trajectory, output_format, unwritable_to
 from posegraph.doctor import diagnose
 from posegraph.evaluation import evaluate
 from posegraph.io import ReadOptions, ReadResult, read_graph
@@ -117,6 +117,34 @@ def _check_output(
     check_replaceable(path)
 
 
+def _check_drop_rejected(args: argparse.Namespace) -> None:
+    """``--drop-rejected`` needs a robust run, and a graph file to leave its rejections out of."""
+    if not args.drop_rejected:
+        return
+    if args.robust is None:
+        raise UsageError("--drop-rejected needs --robust: only a robust run rejects measurements")
+    if args.output is None or output_format(args.output) not in GRAPH_FORMATS:
+        raise UsageError(
+            "--drop-rejected leaves the rejected edges out of the graph that -o writes: give -o a"
+            " g2o or TORO file",
+            args.output,
+        )
+
+
+def _output_graph(
+    args: argparse.Namespace, graph: posegraph.PoseGraph
+) -> tuple[posegraph.PoseGraph, str | None]:
+    """The graph that ``-o`` gets (without the rejected measurements, with ``--drop-rejected``)
+    and how the report names the file."""
+    if not args.drop_rejected:
+        return graph, args.output
+    edges, priors = graph.rejected()
+    left_out = f"{np.count_nonzero(edges)} rejected edge(s)"
+    if priors.any():
+        left_out += f" and {np.count_nonzero(priors)} rejected prior(s)"
+    return graph.without_rejected(), f"{args.output} (without the {left_out})"
+
+
 def _check_writable(
     source: str,
     graph: posegraph.PoseGraph,
@@ -149,6 +177,7 @@ def optimize(args: argparse.Namespace) -> int:
     _check_output(args.output)
     _check_output(args.plot, figure=True)
     _check_output(args.covariances, text=True)
+    _check_drop_rejected(args)
     inputs = _Inputs(args)
     read = inputs.graph(args.input)
     graph = read.graph
@@ -173,9 +202,10 @@ def optimize(args: argparse.Namespace) -> int:
         )
     graph.set_values(result.values)
     covariances = _covariances(args.input, graph) if args.covariances else None
+    output, wrote = _output_graph(args, graph)
     if args.output:
         convert_graph(
-            graph,
+            output,
             args.output,
             g2o_rotation_information=args.g2o_rotation_information,
             sim3_dialect=read.sim3_dialect or "a",
@@ -203,7 +233,7 @@ def optimize(args: argparse.Namespace) -> int:
         "summary": summary.as_dict(),
         "skipped_lines": inputs.skipped_lines,
     }
-    written = {"wrote": args.output, "plotted": args.plot, "covariances": args.covariances}
+    written = {"wrote": wrote, "plotted": args.plot, "covariances": args.covariances}
     text = format_summary(args.input, graph, summary, written, read.lifted_scale_information)
     _emit(args, record, text)
     return EXIT_OK if summary.converged else EXIT_NOT_CONVERGED
@@ -334,6 +364,7 @@ def scale_drift(args: argparse.Namespace) -> int:
     _refuse_to_overwrite(args.input, args.output, args.overwrite)
     _check_output(args.output)
     _check_output(args.plot, figure=True)
+    _check_drop_rejected(args)
     inputs = _Inputs(args)
     read = inputs.graph(args.input)
     graph = read.graph
@@ -356,14 +387,13 @@ def scale_drift(args: argparse.Namespace) -> int:
         lifted = correction.lifted_scale_information
     after = Trajectory.of_graph(correction.graph, correction.poses)  # as asked for
     corrected = Trajectory.of_graph(correction.graph)  # world-from-camera
+    output, wrote = _output_graph(args, correction.graph)
     if args.output:
         written = output_format(args.output)
         if written in ("tum", "kitti"):
             write_trajectory(after, args.output, written)
         else:
-            convert_graph(
-                correction.graph, args.output, written, sim3_dialect=read.sim3_dialect or "a"
-            )
+            convert_graph(output, args.output, written, sim3_dialect=read.sim3_dialect or "a")
     ate = None
     if truth is not None:
         ate = tuple(evaluate(poses, truth, "se3").ate.rmse for poses in (before, corrected))
@@ -390,7 +420,7 @@ def scale_drift(args: argparse.Namespace) -> int:
         "ate_after": ate[1] if ate else None,
         "skipped_lines": inputs.skipped_lines,
     }
-    written = {"wrote": args.output, "plotted": args.plot}
+    written = {"wrote": wrote, "plotted": args.plot}
     text = format_scale_drift(args.input, correction, ate, written, lifted)
     _emit(args, record, text)
     return EXIT_OK if summary.converged else EXIT_NOT_CONVERGED

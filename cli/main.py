@@ -30,7 +30,8 @@ EXAMPLES = {
   posegraph optimize datasets/sphere_small.g2o -o optimised.g2o --plot optimised.png
   posegraph optimize city.graph -o city.g2o --init odometry --max-iterations 50 --json
   posegraph optimize garage.g2o -o out.g2o --fix 0 17 --g2o-rotation-information
-  posegraph optimize intel.g2o -o out.g2o --robust gnc --covariances covariances.txt""",
+  posegraph optimize intel.g2o -o out.g2o --robust gnc --covariances covariances.txt
+  posegraph optimize false_loops.g2o -o inliers.g2o --robust gnc --drop-rejected --plot gnc.png""",
     "info": """examples:
   posegraph info datasets/manhattan_small.g2o
   posegraph info broken.g2o --lenient --json""",
@@ -125,6 +126,11 @@ def _parser() -> argparse.ArgumentParser:
         "--robust-priors",
         action="store_true",
         help="apply the kernel to the priors too (absolute fixes such as GNSS)",
+    )
+    solving.add_argument(
+        "--drop-rejected",
+        action="store_true",
+        help="leave the edges and priors that --robust rejected out of -o's graph (g2o or TORO)",
     )
     solving.add_argument("--max-iterations", type=at_least(0), default=100, help="default: 100")
     solving.add_argument("--time-limit", type=at_least(0, float), help="seconds")

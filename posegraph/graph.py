@@ -212,15 +212,32 @@ class Solution:
         found over, if they still come first and unchanged, and 1 for those added since (1 for
         all of a kind if some of it were removed or changed)."""
         return (
-            _carried_weights(edges, self.edges, self.edge_weights),
-            _carried_weights(priors, self.priors, self.prior_weights),
+            _carried(edges, self.edges, self.edge_weights, 1.0),
+            _carried(priors, self.priors, self.prior_weights, 1.0),
         )
 
+    def rejected_for(self, edges: EdgeSet, priors: EdgeSet) -> tuple[np.ndarray, np.ndarray]:
+        """Masks over ``edges`` and over ``priors`` of the measurements that this solution's
+        robust run rejected (``summary.rejected_edges`` and ``rejected_priors``), by the rule of
+        ``weights_for``: none of those added since (none of a kind if some of it were removed
+        or changed)."""
+        rejected = []
+        for measured, solved, indices in (
+            (edges, self.edges, self.summary.rejected_edges),
+            (priors, self.priors, self.summary.rejected_priors),
+        ):
+            flags = np.zeros(len(solved), dtype=bool)
+            flags[indices] = True
+            rejected.append(_carried(measured, solved, flags, False))
+        return rejected[0], rejected[1]
 
-def _carried_weights(measured: EdgeSet, solved: EdgeSet, weights: np.ndarray) -> np.ndarray:
-    carried = np.ones(len(measured))
+
+def _carried(measured: EdgeSet, solved: EdgeSet, values: np.ndarray, added) -> np.ndarray:
+    """``values`` (one per solved measurement) for ``measured``, if it starts with exactly the
+    ``solved`` ones; ``added`` for those after them, and for all if it does not."""
+    carried = np.full(len(measured), added, dtype=values.dtype)
     if measured.starts_with(solved):
-        carried[: len(solved)] = weights
+        carried[: len(solved)] = values
     return carried
 
 
@@ -546,6 +563,21 @@ class PoseGraph:
         other = self.copy()
         other.edges = self.edges.subset(keep)
         other.structure_version += 1
+        return other
+
+    def rejected(self) -> tuple[np.ndarray, np.ndarray]:
+        """Masks over the between edges and over the priors of those that the last robust
+        ``optimize`` rejected (``Solution.rejected_for``: none added since); none without one."""
+        if self.solution is None:
+            return np.zeros(self.num_edges, dtype=bool), np.zeros(len(self.priors), dtype=bool)
+        return self.solution.rejected_for(self.edges, self.priors)
+
+    def without_rejected(self) -> PoseGraph:
+        """A copy without the between edges and priors that the last robust ``optimize``
+        rejected (``rejected``): the inliers, to keep, to write or to solve in least squares."""
+        edges, priors = self.rejected()
+        other = self.with_edges(~edges)
+        other.priors = self.priors.subset(~priors)
         return other
 
     def weighted(self, weights: np.ndarray, prior_weights: np.ndarray | None = None) -> PoseGraph:

@@ -3,7 +3,8 @@
 Odometry (edges between consecutive nodes) is drawn as the trajectory line; loop closures as
 thin lines of a lighter shade; priors (GNSS fixes, say) as crosses at their measured positions.
 Several inputs are overlaid, one colour each (before/after); priors shared with an earlier input
-are drawn once.
+are drawn once. In a graph that a robust ``optimize`` left, the measurements it rejected
+(``PoseGraph.without_rejected``) are drawn apart: edges dashed in red, priors circled in red.
 SE2 graphs are drawn top-down; SE3 and Sim3 in 3D (or top-down with ``view="top"``).
 """
 
@@ -27,7 +28,8 @@ from .io.atomic import atomic_path  # noqa: E402
 from .lie import SE2  # noqa: E402
 from .trajectory_io import as_se3  # noqa: E402
 
-COLORS = ["tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown"]
+COLORS = ["tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown", "tab:olive"]
+REJECTED_COLOR = "tab:red"
 
 
 def _segments(positions: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
@@ -49,6 +51,29 @@ def _draw(axes, three_d: bool, positions, loops, color, label) -> None:
         )
         axes.add_collection(collection)
     axes.plot(*points.T, color=color, linewidth=1.0, label=label)
+
+
+def _draw_rejected(axes, three_d: bool, segments: np.ndarray, fixes: np.ndarray) -> None:
+    """The edges (``segments``) and the priors' positions (``fixes``) a robust run rejected."""
+    dims = 3 if three_d else 2
+    if len(segments):
+        collection = (Line3DCollection if three_d else LineCollection)(
+            segments[:, :, :dims],
+            colors=REJECTED_COLOR,
+            linewidths=0.6,
+            linestyles="dashed",
+            label=f"{len(segments)} rejected edges",
+        )
+        axes.add_collection(collection)
+    if len(fixes):
+        axes.scatter(
+            *fixes[:, :dims].T,
+            marker="o",
+            s=60,
+            facecolors="none",
+            edgecolors=REJECTED_COLOR,
+            label=f"{len(fixes)} rejected priors",
+        )
 
 
 def _finish(figure, axes, three_d: bool, title: str | None, path: str) -> None:
@@ -104,14 +129,22 @@ def plot_graphs(
     for k, (label, graph) in enumerate(graphs):
         color = COLORS[k % len(COLORS)]
         positions = as_se3(graph.values).translation
+        rejected_edges, rejected_priors = graph.rejected()
         loop = ~odometry_mask(graph)
-        loops = _segments(positions, graph.edges.i[loop], graph.edges.j[loop])
-        count = int(loop.sum())
-        _draw(axes, three_d, positions, loops, color, f"{label} ({count} loop closures)")
+        kept = loop & ~rejected_edges
+        loops = _segments(positions, graph.edges.i[kept], graph.edges.j[kept])
+        count = f"{loop.sum()} loop closures"
+        if rejected_edges[loop].any():
+            count += f", {np.count_nonzero(rejected_edges[loop])} rejected"
+        _draw(axes, three_d, positions, loops, color, f"{label} ({count})")
         fixes = as_se3(graph.priors.measurements).translation[:, : 3 if three_d else 2]
         if len(fixes) and not any(np.array_equal(fixes, other) for other in drawn_priors):
             axes.scatter(*fixes.T, marker="x", color=color, label=f"{len(fixes)} priors")
             drawn_priors.append(fixes)
+        rejected = _segments(
+            positions, graph.edges.i[rejected_edges], graph.edges.j[rejected_edges]
+        )
+        _draw_rejected(axes, three_d, rejected, fixes[rejected_priors])
     _finish(figure, axes, three_d, title, path)
 
 

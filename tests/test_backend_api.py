@@ -874,6 +874,47 @@ def test_marginals_after_gnc_leave_the_rejected_loops_out():
     )
 
 
+def test_without_rejected_keeps_what_a_robust_solve_kept():
+    """After GNC, ``rejected`` marks exactly the false loops and the false fixes, and
+    ``without_rejected`` holds the rest. GNC's last solve is least squares over its decisions,
+    so least squares over the inliers stays at the robust solution, where the TLS cost is theirs
+    plus ½c² for each rejected measurement (c = √χ²₃(0.999)). Measurements added since are not
+    rejected; a removed one makes its kind's rejections unknown (``Solution.weights_for``)."""
+    from scipy.stats import chi2 as chi2_distribution
+
+    graph, false_fixes = city_with_fixes(0.3, seed=0)
+    corrupted, false_loops = add_false_loops(graph, 0.1, seed=0)
+    robust = posegraph.optimize(corrupted, robust="gnc", robust_priors=True)
+    edges, priors = corrupted.rejected()
+    np.testing.assert_array_equal(edges, false_loops)
+    np.testing.assert_array_equal(priors, false_fixes)
+    inliers = corrupted.without_rejected()
+    np.testing.assert_array_equal(inliers.edges.i, corrupted.edges.i[~false_loops])
+    np.testing.assert_array_equal(inliers.edges.j, corrupted.edges.j[~false_loops])
+    np.testing.assert_array_equal(inliers.priors.i, corrupted.priors.i[~false_fixes])
+    assert not inliers.rejected()[0].any() and not inliers.rejected()[1].any()
+    least_squares = posegraph.optimize(inliers, init="file")
+    assert least_squares.summary.final_error == pytest.approx(
+        least_squares.summary.initial_error, rel=1e-9
+    )
+    np.testing.assert_allclose(inliers.positions(), corrupted.positions(), atol=1e-6)
+    width_squared = chi2_distribution.ppf(0.999, 3)
+    rejected = false_loops.sum() + false_fixes.sum()
+    assert robust.summary.final_error == pytest.approx(
+        least_squares.summary.final_error + 0.5 * width_squared * rejected, rel=1e-9
+    )
+    corrupted.add_edge(0, 299, graph.values[0].between(graph.values[299]), np.eye(3))
+    edges, priors = corrupted.rejected()
+    np.testing.assert_array_equal(edges, np.append(false_loops, False))
+    np.testing.assert_array_equal(priors, false_fixes)
+    corrupted.remove_edges([0])
+    edges, priors = corrupted.rejected()
+    assert not edges.any()
+    np.testing.assert_array_equal(priors, false_fixes)
+    posegraph.optimize(graph)
+    assert not any(mask.any() for mask in graph.rejected())  # least squares rejects nothing
+
+
 def _count_normal_equations(monkeypatch) -> list:
     """A list that grows by one whenever ``NormalEquations`` are built."""
     built, init = [], NormalEquations.__init__

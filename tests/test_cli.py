@@ -621,6 +621,65 @@ def test_plots_mark_priors_once_per_distinct_set(tmp_path, monkeypatch):
     assert len(crosses) == 2 and len(crosses[1]) == 4
 
 
+def test_plots_draw_what_a_robust_run_rejected_apart(monkeypatch):
+    """In a graph that GNC left, the rejected loops are dashed red segments between the poses
+    they join, the rejected fixes red circles at their measured positions, and the graph's
+    label counts the rejected loops; the graph before the run draws every loop alike."""
+    from posegraph import optimize, plotting
+
+    graph, false_fixes = city_with_fixes(0.3, seed=0)
+    corrupted, false_loops = add_false_loops(graph, 0.1, seed=0)
+    before = corrupted.copy()
+    optimize(corrupted, robust="gnc", robust_priors=True)
+    figures = []
+    monkeypatch.setattr(plotting, "save_figure", lambda figure, path: figures.append(figure))
+    plotting.plot_graphs([("initial", before), ("optimised", corrupted)], "x.png")
+    axes = figures[0].axes[0]
+    labels = [text.get_text() for text in axes.get_legend().get_texts()]
+    loops = int(robust_mask(corrupted, "loops").sum())
+    rejected_loops, rejected_fixes = int(false_loops.sum()), int(false_fixes.sum())
+    assert labels == [
+        f"initial ({loops} loop closures)",
+        f"{len(false_fixes)} priors",
+        f"optimised ({loops} loop closures, {rejected_loops} rejected)",
+        f"{rejected_loops} rejected edges",
+        f"{rejected_fixes} rejected priors",
+    ]
+    segments = [len(c.get_segments()) for c in axes.collections if hasattr(c, "get_segments")]
+    assert segments == [loops, loops - rejected_loops, rejected_loops]
+    (dashed,) = [c for c in axes.collections if c.get_label() == labels[3]]
+    positions, edges = corrupted.positions(), corrupted.edges
+    ends = np.stack([positions[edges.i[false_loops]], positions[edges.j[false_loops]]], axis=1)
+    np.testing.assert_allclose(np.array(dashed.get_segments()), ends)
+    (circles,) = [c for c in axes.collections if c.get_label() == labels[4]]
+    fixes = corrupted.priors.measurements[false_fixes].translation
+    np.testing.assert_allclose(circles.get_offsets(), fixes)
+
+
+def test_drop_rejected_writes_the_inliers(tmp_path):
+    """`--drop-rejected` leaves the loops that `--robust` rejected out of -o's graph, and the
+    report says so; it is refused without --robust, without -o, or when -o holds poses only."""
+    graph, _ = city_with_fixes(0.0, seed=0)
+    corrupted, false = add_false_loops(graph, 0.1, seed=0)
+    path, out = tmp_path / "false_loops.g2o", tmp_path / "inliers.g2o"
+    write_graph(corrupted, str(path))
+    text = run("optimize", path, "--robust", "gnc", "-o", out, "--drop-rejected").stdout
+    assert f"wrote           {out} (without the {false.sum()} rejected edge(s))" in text
+    written = read_graph(str(out)).graph
+    np.testing.assert_array_equal(written.node_ids, corrupted.node_ids)
+    np.testing.assert_array_equal(written.edges.i, corrupted.edges.i[~false])
+    np.testing.assert_array_equal(written.edges.j, corrupted.edges.j[~false])
+    kept = read_graph(str(path)).graph.num_edges
+    assert run_json("optimize", path, "--robust", "gnc", "-o", out)["edges"] == kept
+    for extra, message in [
+        (["-o", out], "--drop-rejected needs --robust: only a robust run rejects measurements"),
+        (["--robust", "gnc"], "--drop-rejected leaves the rejected edges out of the graph that -o"),
+        (["--robust", "gnc", "-o", tmp_path / "poses.tum"], f"{tmp_path / 'poses.tum'}: --drop"),
+    ]:
+        refused = run("optimize", path, "--drop-rejected", *extra, check_exit=2)
+        assert f"posegraph: error: {message}" in refused.stderr
+
+
 def test_eval_reports_ate_and_rpe(tmp_path):
     from posegraph_datasets.generators import sphere
 
@@ -879,6 +938,12 @@ def test_scale_drift_command_rejects_false_loops(tmp_path):
     assert robust["ate_after"] == pytest.approx(without["ate_after"], rel=1e-3)
     text = run("scale-drift", source, "--robust", "gnc").stdout
     assert "robust          gnc:" in text and "on 29 of 328 edges: 9 edge(s) rejected: " in text
+    inliers = tmp_path / "inliers.g2o"
+    run("scale-drift", source, "--robust", "gnc", "-o", inliers, "--drop-rejected")
+    kept = np.setdiff1d(np.arange(328), false)
+    written, read = read_graph(str(inliers)).graph, read_graph(str(source)).graph
+    np.testing.assert_array_equal(written.edges.i, read.edges.i[kept])
+    np.testing.assert_array_equal(written.edges.j, read.edges.j[kept])
 
 
 def test_scale_drift_warns_that_a_file_of_se3_edges_only_carries_no_scale_change(tmp_path):
