@@ -96,19 +96,26 @@ def _refuse_to_overwrite(source: str, target: str | None, allowed: bool) -> None
 
 
 def _check_output(
-    path: str | None, to: str | None = None, figure: bool = False, text: bool = False
+    path: str | None,
+    to: str | None = None,
+    figure: bool = False,
+    text: bool = False,
+    remedy: str = "",
 ) -> None:
     """Fail before any work if ``path`` cannot be written: a format not known by its suffix
-    (or ``to``; a ``figure``'s by matplotlib; ``text`` has one format), a folder that does
-    not exist, or a read-only file."""
+    (or ``to``; a ``figure``'s by matplotlib; ``text`` has one format; ``remedy`` follows that
+    refusal), a folder that does not exist, or a read-only file."""
     if path is None:
         return
-    if figure:
-        from posegraph.plotting import check_figure_path
+    try:
+        if figure:
+            from posegraph.plotting import check_figure_path
 
-        check_figure_path(path)
-    elif not text:
-        output_format(path, to)
+            check_figure_path(path)
+        elif not text:
+            output_format(path, to)
+    except ValueError as error:  # its message starts with the path, which UsageError adds
+        raise UsageError(str(error).removeprefix(f"{path}: ") + remedy, path) from None
     folder = os.path.dirname(path) or "."
     if not os.path.isdir(folder):
         raise UsageError(f"cannot write: there is no folder {folder}", path)
@@ -280,10 +287,7 @@ def info(args: argparse.Namespace) -> int:
 
 def convert(args: argparse.Namespace) -> int:
     _refuse_to_overwrite(args.input, args.output, args.overwrite)
-    try:
-        _check_output(args.output, args.to)
-    except ValueError as error:
-        raise UsageError(f"{error}; say --to g2o|toro|tum|kitti") from None
+    _check_output(args.output, args.to, remedy="; say --to g2o|toro|tum|kitti")
     inputs = _Inputs(args)
     graph = inputs.graph(args.input).graph
     _check_writable(args.input, graph, args.output, to=args.to)
