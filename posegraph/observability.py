@@ -17,13 +17,17 @@ Jacobians of every residual taken as met (jr⁻¹ = I: ∂r/∂δᵢ = −Ad(X�
 motion of a part of the map that no measurement sees is one, exactly, at any values. They are
 found by factorising H₁ = Σ J₀ᵀ Πₑ J₀, Πₑ the projector onto the directions that edge e's
 information measures: unit weights, so that how much each edge measures (information that
-spans 1e20 to 100, say) does not condition the test, only what it measures.
+spans 1e20 to 100, say) does not condition the test, only what it measures. Where every node is
+tied to a held node or to a prior of full rank by edges of full rank, there is none, and nothing
+is factorised: along such an edge J₀ δ = 0 gives δⱼ = Ad(Xⱼ⁻¹ Xᵢ) δᵢ, and δ = 0 at the held
+node or the prior.
 """
 
 from __future__ import annotations
 
 import numpy as np
 import scipy.sparse
+import scipy.sparse.csgraph
 
 from .factors import Linearization, between_jacobians, relative_poses
 from .graph import PoseGraph, named_nodes, start_information
@@ -124,6 +128,21 @@ def first_order_information(
     return data
 
 
+def tied_by_full_rank(graph: PoseGraph) -> bool:
+    """Whether every node is joined to a held node (``PoseGraph.gauge_nodes``) or to a node
+    with a prior of full rank by edges whose information is of full rank: then no direction of
+    the free nodes is undetermined (module docstring)."""
+    full = ~_unmeasured(np.linalg.eigvalsh(graph.edges.information)).any(axis=1)
+    full_priors = ~_unmeasured(np.linalg.eigvalsh(graph.priors.information)).any(axis=1)
+    n, edges = graph.num_nodes, graph.edges
+    ties = scipy.sparse.coo_matrix((np.ones(full.sum()), (edges.i[full], edges.j[full])), (n, n))
+    _, labels = scipy.sparse.csgraph.connected_components(ties, directed=False)
+    anchored = np.zeros(labels.max(initial=-1) + 1, dtype=bool)
+    anchored[labels[graph.gauge_nodes()]] = True
+    anchored[labels[graph.priors.i[full_priors]]] = True
+    return bool(anchored.all())
+
+
 def undetermined_direction(
     graph: PoseGraph, values: LieGroup, linear_solver: str = "auto"
 ) -> np.ndarray | None:
@@ -134,7 +153,10 @@ def undetermined_direction(
     not factorise (then H₁ plus the least ridge that does is: ``factorize_regularized``); the
     direction is found by inverse iteration from that unit column. None also if no ridge
     factorises it (as information that is not positive semi-definite can make it), or if H₁
-    overflows at ``values`` (a pose too large for double precision), where nothing is told."""
+    overflows at ``values`` (a pose too large for double precision), where nothing is told,
+    and without factorising where the graph is ``tied_by_full_rank``."""
+    if tied_by_full_rank(graph):
+        return None
     system = NormalEquations(graph, graph.gauge_nodes(), linear_solver)
     if system.size == 0:
         return None

@@ -14,7 +14,7 @@ from posegraph_datasets.outliers import add_false_loops, rejection_rates, withou
 from posegraph_datasets.paths import BENCHMARK_GRAPHS, BEST_KNOWN_ERROR
 
 import posegraph
-from posegraph import gnc
+from posegraph import gnc, observability
 from posegraph.anchoring import priors_as_edges
 from posegraph.api import GNC_QUANTILE, KERNEL_QUANTILE, robust_mask
 from posegraph.chordal import chordal_values
@@ -34,6 +34,7 @@ from posegraph.graph import PoseGraph
 from posegraph.initialization import choose, initialize
 from posegraph.lie import SE2, SE3, Sim3
 from posegraph.observability import (
+    tied_by_full_rank,
     undetermined_direction,
     unmeasured_directions,
     unmeasured_share,
@@ -293,6 +294,44 @@ def test_maps_joined_by_enough_position_only_edges_have_no_undetermined_directio
     assert undetermined_direction(graph, graph.values) is None
 
 
+def _factorised_direction(graph: PoseGraph, monkeypatch) -> np.ndarray | None:
+    """``undetermined_direction`` found by factorising H₁, even where the graph is tied by
+    measurements of full rank."""
+    with monkeypatch.context() as patch:
+        patch.setattr(observability, "tied_by_full_rank", lambda graph: False)
+        return undetermined_direction(graph, graph.values)
+
+
+def test_a_graph_tied_by_full_rank_measurements_needs_no_factorisation(monkeypatch):
+    """Nodes joined to a held node, or to a prior of full rank, by edges of full rank cannot
+    move (``observability``'s docstring): ``tied_by_full_rank`` says so, and the test of
+    undetermined directions then builds nothing, where factorising H₁ agrees. A loop measured by
+    position only does not untie a chain of full rank. Position-only edges or priors tie
+    nothing: there the factorisation decides, whichever way (a map held only by GNSS positions
+    cannot turn; one hanging by two position-only edges in 3D can)."""
+    chain = random_graph(SE3, 30, 5, seed=76)
+    position_only = np.diag([1.0, 1.0, 1.0, 0.0, 0.0, 0.0])
+    chain.add_edge(14, 60, chain.values[2].between(chain.values[25]), position_only)
+    fixed_by_gnss, _ = city_with_fixes(0.0, seed=0)  # fixes of full rank, no node held
+    assert fixed_by_gnss.gauge_nodes().size == 0
+    track, _ = gnss_track(SE2, heading=0.3, seed=0)  # position-only fixes
+    posegraph.optimize(track)
+    hanging, turning = maps_joined_by_positions(SE3, 3), maps_joined_by_positions(SE3, 2)
+    cases = [(chain, True), (fixed_by_gnss, True), (track, False), (hanging, False)]
+    for graph, tied in cases:
+        assert tied_by_full_rank(graph) is tied
+        assert _factorised_direction(graph, monkeypatch) is None
+    assert not tied_by_full_rank(turning)
+    assert undetermined_direction(turning, turning.values) is not None
+
+    def untouched(*args):
+        raise AssertionError("H₁ was built")
+
+    monkeypatch.setattr(observability, "first_order_information", untouched)
+    for graph, _ in cases[:2]:
+        assert undetermined_direction(graph, graph.values) is None
+
+
 def test_covariances_of_a_map_that_can_turn_about_position_only_edges_can_be_refused():
     """Two SE3 maps joined by two position-only edges: the second can turn about the line
     through them. At the optimum, CHOLMOD factorised H with that turn's pivot at 3e-16 of its
@@ -461,16 +500,18 @@ def test_a_tree_start_composes_the_measurements_of_a_chain_beyond_46341_poses(me
 
 
 @pytest.mark.parametrize("name", BENCHMARK_GRAPHS)
-def test_defaults_reach_the_best_known_error(shared_dataset, name):
+def test_defaults_reach_the_best_known_error(shared_dataset, name, monkeypatch):
     """From the file's values (or none), with defaults: at most best known + 1e-6 relative
     (MIT goes far below its listed 385.119: 20.603, confirmed by gtsam's own error). At the
-    optimum, the test for directions that nothing measures finds none (its least pivot share
-    on these graphs is 4e-6, against its threshold 1e-10)."""
+    optimum, the test for directions that nothing measures finds none, by factorising H₁ too
+    (its least pivot share on these graphs is 4e-6, against its threshold 1e-10), where the
+    graph's edges of full rank tie every node to the held one."""
     graph = posegraph.read_graph(str(shared_dataset(name))).graph
     result = posegraph.optimize(graph)
     assert result.summary.converged
     assert result.summary.final_error <= BEST_KNOWN_ERROR[name] * (1 + 1e-6)
-    assert undetermined_direction(graph, graph.values) is None
+    assert tied_by_full_rank(graph)
+    assert _factorised_direction(graph, monkeypatch) is None
 
 
 @pytest.mark.parametrize("name", KERNELS)
