@@ -43,7 +43,8 @@ def _options(args: argparse.Namespace) -> ReadOptions:
 class _Inputs:
     """A command's input files, read with its options. What lenient reading skipped is kept for
     the JSON document (``skipped_lines``) and, with ``warn_skipped`` in text mode, reported on
-    stderr as soon as it is read: the results leave those lines out."""
+    stderr as soon as it is read: the results leave out what those lines say (a node whose
+    vertex line was skipped keeps its edges)."""
 
     def __init__(self, args: argparse.Namespace, warn_skipped: bool = True) -> None:
         self.options = _options(args)
@@ -57,7 +58,7 @@ class _Inputs:
             for why, count, line in read.skipped_by_reason()
         ]
         if read.skipped and self.warn_skipped:
-            warn(f"{path}: {read.skipped_report()}; the results leave them out")
+            warn(f"{path}: {read.skipped_report()}; the results leave out what those lines say")
         return read
 
     def trajectory(self, path: str) -> Trajectory:
