@@ -196,7 +196,7 @@ def optimize(args: argparse.Namespace) -> int:
             raise UsageError(f"--fix: {error.args[0]}") from None
     _check_writable(args.input, graph, args.output)
     before = graph.copy()
-    with Progress(enabled=_talks(args)) as progress:
+    with Progress(_talks(args), args.solver) as progress:
         with _about(args.input):  # values the initialisation cannot hold, say
             result = posegraph.optimize(graph, callback=progress, **_solving(args))
     summary = result.summary
@@ -379,7 +379,7 @@ def scale_drift(args: argparse.Namespace) -> int:
         _check_writable(args.input, graph, args.output, group=posegraph.Sim3)
     truth = inputs.trajectory(args.gt) if args.gt else None  # read before the work
     before = Trajectory.of_graph(graph)
-    with Progress(enabled=_talks(args)) as progress:
+    with Progress(_talks(args), args.solver) as progress:
         with _about(args.input):  # a graph it cannot correct (SE2), values beyond doubles
             correction = correct_scale_drift(
                 graph, args.scale_information, args.convention, callback=progress, **_solving(args)

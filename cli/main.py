@@ -19,6 +19,7 @@ from posegraph.benchmarks.timing import add_timing_arguments, at_least
 from posegraph.evaluation import MAX_KEY_DIFFERENCE
 from posegraph.initialization import INITIALIZERS
 from posegraph.io.tags import EDGE2_ORDERS
+from posegraph.solvers.options import METHODS
 
 from . import commands
 from .errors import EXIT_BAD_INPUT, EXIT_NOT_CONVERGED, UsageError, report
@@ -101,7 +102,13 @@ def _parser() -> argparse.ArgumentParser:
         "call for where that is larger; the reports show it)",
     )
     solving = argparse.ArgumentParser(add_help=False)
-    solving.add_argument("--solver", choices=["lm", "gn"], default="lm", help="default: lm")
+    solving.add_argument(
+        "--solver",
+        choices=METHODS,
+        default="lm",
+        help="lm (Levenberg-Marquardt, default), gn (Gauss-Newton) or dogleg (Powell's, in a"
+        " trust region: one factorisation per linearisation)",
+    )
     solving.add_argument(
         "--init",
         choices=INITIALIZERS,

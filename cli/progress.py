@@ -9,10 +9,13 @@ from posegraph.solvers import IterationRecord
 
 
 class Progress:
-    """Prints one line per iteration to stderr when it is a terminal (never when piped)."""
+    """Prints one line per iteration to stderr when it is a terminal (never when piped); its
+    damping column is Levenberg-Marquardt's λ, or the dogleg's trust-region radius with
+    ``method`` "dogleg"."""
 
-    def __init__(self, enabled: bool) -> None:
+    def __init__(self, enabled: bool, method: str = "lm") -> None:
         self.enabled = enabled and sys.stderr.isatty()
+        self.damping_name = "radius" if method == "dogleg" else "lambda"
         self.interrupted = False
         self._previous_handler = None
 
@@ -34,7 +37,7 @@ class Progress:
         if self.enabled:
             if record.iteration == 1:
                 stage = "  stage" if record.stage else ""
-                header = f"{'iter':>5} {'error':>16} {'lambda':>9} {'step':>9} {'time':>8}{stage}"
+                header = f"{'iter':>5} {'error':>16} {self.damping_name:>9} {'step':>9} {'time':>8}{stage}"
                 print(header, file=sys.stderr)
             stage = f"  {record.stage}" if record.stage else ""
             mark = "" if record.accepted else "  (rejected)"

@@ -194,15 +194,21 @@ def monocular_file(tmp_path, false_loops: float = 0.0) -> tuple[str, str, np.nda
     return str(source), str(truth), np.flatnonzero(false)
 
 
-@pytest.mark.parametrize("robust", [[], ["--robust", "gnc"]], ids=["least squares", "gnc"])
+@pytest.mark.parametrize(
+    "options",
+    [[], ["--robust", "gnc"], ["--solver", "dogleg"]],
+    ids=["least squares", "gnc", "dogleg"],
+)
 @pytest.mark.parametrize("command", ["optimize", "scale-drift"])
-def test_progress_is_shown_on_a_terminal(tmp_path, command, robust):
+def test_progress_is_shown_on_a_terminal(tmp_path, command, options):
     """Under a pseudo-terminal, optimize and scale-drift print an iteration table while they
-    run; a GNC run's table names the stage of each iteration."""
+    run; a GNC run's table names the stage of each iteration, and the dogleg's gives its
+    trust-region radius where Levenberg-Marquardt's gives λ."""
     source = EXAMPLE if command == "optimize" else monocular_file(tmp_path)[0]
+    robust = "--robust" in options
     main, secondary = pty.openpty()
     process = subprocess.Popen(
-        [*COMMAND, command, source, *robust],
+        [*COMMAND, command, source, *options],
         stdin=secondary,
         stdout=secondary,
         stderr=secondary,
@@ -220,10 +226,10 @@ def test_progress_is_shown_on_a_terminal(tmp_path, command, robust):
     os.close(main)
     assert process.wait(timeout=120) == 0
     text = output.decode()
-    assert "iter" in text and "lambda" in text
+    assert "iter" in text and ("radius" if "dogleg" in options else "lambda") in text
     assert "    1 " in text  # the first iteration's line
-    assert ("stage" in text) == bool(robust)
-    assert ("s  least squares" in text) == bool(robust)  # after the time column
+    assert ("stage" in text) == robust
+    assert ("s  least squares" in text) == robust  # after the time column
 
 
 def test_optimize_refuses_to_overwrite_its_input(tmp_path):

@@ -40,6 +40,7 @@ from posegraph.observability import (
     unmeasured_share,
 )
 from posegraph.robust import KERNELS, RobustKernel, default_width, tls_gnc_weights
+from posegraph.solvers import SolverOptions
 from posegraph.solvers.options import DEFAULT_INITIAL_DAMPING
 from posegraph.sparse_cholesky import NotPositiveDefinite
 from posegraph.trajectory_io import Trajectory
@@ -184,6 +185,10 @@ def test_a_node_with_directions_nothing_measures_is_optimised_from_every_start(g
         assert summary.final_error == pytest.approx(best.final_error, rel=1e-6), init
     summary = posegraph.optimize(graph.copy(), robust="gnc").summary
     assert summary.final_error == pytest.approx(best.final_error, rel=1e-6)
+    for init in ("file", "auto"):  # the dogleg holds those directions back as LM damps them
+        summary = posegraph.optimize(graph.copy(), init, SolverOptions(method="dogleg")).summary
+        assert summary.converged, init
+        assert summary.final_error == pytest.approx(best.final_error, rel=1e-6), init
     leaf, started = chordal_values(graph)[-1].as_matrix(), graph.values[-1].as_matrix()
     d = group.point_dim
     if measured == "position":  # the rotation (and Sim3's scale: s R) are not measured

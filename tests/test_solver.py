@@ -28,7 +28,7 @@ def _gradient_norm(graph, values, held):
     return np.abs(gradient).max()
 
 
-@pytest.mark.parametrize("method", ["lm", "gn"])
+@pytest.mark.parametrize("method", ["lm", "gn", "dogleg"])
 @pytest.mark.parametrize("group", POSE_GROUPS, ids=lambda g: g.__name__)
 def test_converges_to_a_stationary_point(group, method):
     graph = random_graph(group, 30, 20, seed=41, noise=0.1, priors=1)
@@ -59,12 +59,49 @@ def test_a_step_that_gains_far_less_than_predicted_does_not_end_the_run():
     assert summary.final_error == pytest.approx(best, rel=1e-6)
 
 
-def test_gauss_newton_and_levenberg_marquardt_agree():
+def test_gauss_newton_levenberg_marquardt_and_dogleg_agree():
     graph = random_graph(SE3, 25, 15, seed=42, noise=0.05)
     tight = dict(relative_decrease=1e-14)
     lm = optimize(graph, SolverOptions(method="lm", **tight))
-    gn = optimize(graph, SolverOptions(method="gn", **tight))
-    np.testing.assert_allclose(lm.values.local(gn.values), 0.0, atol=1e-7)
+    for method in ("gn", "dogleg"):
+        other = optimize(graph, SolverOptions(method=method, **tight))
+        np.testing.assert_allclose(lm.values.local(other.values), 0.0, atol=1e-7)
+
+
+def test_dogleg_factorises_once_per_linearisation_and_shrinks_its_region_on_rejection(
+    monkeypatch,
+):
+    """From a start far off (noise 1.5 rad and m), the dogleg rejects steps, as
+    Levenberg-Marquardt does; each rejection halves the trust region at least (the radius is
+    the records' damping) and costs no factorisation: H is factorised, undamped, at most once
+    per linearisation (the last may end the run by its Newton decrement, unfactorised). It
+    ends where Levenberg-Marquardt ends."""
+    graph = random_graph(SE2, 40, 30, seed=43, noise=1.5)
+    factorisations, linearisations = [], []
+    factorize, assemble = NormalEquations.factorize, NormalEquations.assemble
+
+    def counted_factorize(self, data, damping=None):
+        factorisations.append(damping)
+        factorize(self, data, damping)
+
+    def counted_assemble(self, *args):
+        linearisations.append(1)
+        return assemble(self, *args)
+
+    monkeypatch.setattr(NormalEquations, "factorize", counted_factorize)
+    monkeypatch.setattr(NormalEquations, "assemble", counted_assemble)
+    tight = dict(relative_decrease=1e-14)
+    dogleg = optimize(graph, SolverOptions(method="dogleg", **tight))
+    records = dogleg.summary.iterations
+    assert dogleg.summary.converged and not all(record.accepted for record in records)
+    assert len(linearisations) - 1 <= len(factorisations) <= len(linearisations)
+    assert all(damping is None for damping in factorisations)
+    for before, after in zip(records, records[1:], strict=False):
+        if not after.accepted:
+            assert after.damping <= 0.5 * before.damping
+    monkeypatch.undo()
+    lm = optimize(graph, SolverOptions(method="lm", **tight))
+    assert dogleg.summary.final_error == pytest.approx(lm.summary.final_error, rel=1e-9)
 
 
 @pytest.mark.parametrize("backend", available_backends())
@@ -205,8 +242,8 @@ def test_summary_reports_errors_and_phases():
 
 
 def test_invalid_options_are_refused():
-    with pytest.raises(ValueError, match="method"):
-        SolverOptions(method="dogleg")
+    with pytest.raises(ValueError, match="method is .lm., .gn. or .dogleg., not .powell."):
+        SolverOptions(method="powell")
     with pytest.raises(ValueError, match="damping"):
         SolverOptions(damping="sometimes")
     with pytest.raises(ValueError, match="max_iterations must be ≥ 0"):
@@ -245,7 +282,7 @@ def test_robust_options_are_checked_before_any_work():
 
 
 @pytest.mark.parametrize("group", [SE2, SE3])
-@pytest.mark.parametrize("method", ["lm", "gn"])
+@pytest.mark.parametrize("method", ["lm", "gn", "dogleg"])
 def test_a_map_in_utm_coordinates_converges_at_its_rounding_floor(group, method):
     """Odometry chains 700 km east and 4000 km north of the origin, composed from their first
     pose: their residuals cannot fall below about 1e-9 m, where a step changes the values only

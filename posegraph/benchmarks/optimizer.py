@@ -1,7 +1,8 @@
 """posegraph against gtsam Levenberg-Marquardt on the benchmark graphs, side by side.
 
 Usage: ``python -m posegraph.benchmarks.optimizer [--repeats 3] [--rounds 2] [--budget 0.2]
-[--graphs …]``.
+[--graphs …] [--method lm|dogleg]``. With ``--method dogleg``, posegraph's dogleg runs against
+gtsam's ``DoglegOptimizer`` (default parameters) instead.
 Both start from the same values (the file's, or odometry where it has no vertices) on the same
 graph; gtsam holds the gauge node with a σ = 1e-6 prior. The three timings of a graph take
 turns, ``repeats`` runs each and more until ``budget`` seconds have passed, for ``rounds``
@@ -14,6 +15,7 @@ time ratio posegraph/gtsam, and posegraph's time per phase; then posegraph with 
 from __future__ import annotations
 
 import argparse
+import math
 import time
 from pathlib import Path
 
@@ -22,7 +24,7 @@ from posegraph_datasets.paths import BENCHMARK_GRAPHS, gtsam_data_dir, shared_da
 from ..api import optimize
 from ..graph import PoseGraph
 from ..io import read_graph
-from ..solvers import Summary
+from ..solvers import SolverOptions, Summary
 from .table import MarkdownTable
 from .timing import add_timing_arguments, best_run, taking_turns
 
@@ -39,10 +41,13 @@ def benchmark_files() -> list[Path]:
     return [f for f in files if f.is_file()]
 
 
-def time_gtsam(graph: PoseGraph, repeats: int, budget: float = 0.0) -> tuple[float, int, float]:
-    """Best run of gtsam Levenberg-Marquardt (default parameters) from the graph's values, over
-    at least ``repeats`` runs and ``budget`` seconds (``timing.best_run``): (seconds,
-    iterations, final error ½ Σ rᵀΩr)."""
+def time_gtsam(
+    graph: PoseGraph, repeats: int, budget: float = 0.0, method: str = "lm"
+) -> tuple[float, int, float]:
+    """Best run of gtsam Levenberg-Marquardt (or with ``method`` "dogleg", its dogleg; default
+    parameters) from the graph's values, over at least ``repeats`` runs and ``budget`` seconds
+    (``timing.best_run``): (seconds, iterations, final error ½ Σ rᵀΩr); NaN seconds and error
+    where gtsam raises (its dogleg calls MIT's system indeterminate)."""
     import gtsam
 
     from ..validation.gtsam_bridge import graph_to_gtsam
@@ -50,46 +55,61 @@ def time_gtsam(graph: PoseGraph, repeats: int, budget: float = 0.0) -> tuple[flo
     factors, initial = graph_to_gtsam(graph)
 
     def solve(_):
-        optimizer = gtsam.LevenbergMarquardtOptimizer(
-            factors, initial, gtsam.LevenbergMarquardtParams()
-        )
+        if method == "dogleg":
+            optimizer = gtsam.DoglegOptimizer(factors, initial, gtsam.DoglegParams())
+        else:
+            optimizer = gtsam.LevenbergMarquardtOptimizer(
+                factors, initial, gtsam.LevenbergMarquardtParams()
+            )
         return optimizer.optimize(), optimizer
 
-    best, (result, optimizer) = best_run(solve, repeats, budget)
+    try:
+        best, (result, optimizer) = best_run(solve, repeats, budget)
+    except RuntimeError:
+        return math.nan, 0, math.nan
     return best, optimizer.iterations(), factors.error(result)
 
 
 def time_posegraph(
-    graph: PoseGraph, repeats: int, init: str, budget: float = 0.0
+    graph: PoseGraph, repeats: int, init: str, budget: float = 0.0, method: str = "lm"
 ) -> tuple[float, Summary]:
-    """Best run of ``optimize`` with defaults but ``init``, over at least ``repeats`` runs and
-    ``budget`` seconds: (seconds, summary of that run). ``init`` "file" starts from the graph's
-    values, like gtsam; other initialisations are timed together with the optimisation. Each
-    run optimises a fresh copy of the graph, made untimed."""
-    best, result = best_run(lambda copy: optimize(copy, init=init), repeats, budget, graph.copy)
+    """Best run of ``optimize`` with defaults but ``init`` and ``method``, over at least
+    ``repeats`` runs and ``budget`` seconds: (seconds, summary of that run). ``init`` "file"
+    starts from the graph's values, like gtsam; other initialisations are timed together with
+    the optimisation. Each run optimises a fresh copy of the graph, made untimed."""
+    options = SolverOptions(method=method)
+    best, result = best_run(
+        lambda copy: optimize(copy, init=init, options=options), repeats, budget, graph.copy
+    )
     return best, result.summary
 
 
 def side_by_side(
-    graph: PoseGraph, repeats: int, rounds: int, budget: float = 0.0
+    graph: PoseGraph, repeats: int, rounds: int, budget: float = 0.0, method: str = "lm"
 ) -> tuple[tuple[float, int, float], tuple[float, Summary], tuple[float, Summary]]:
     """``time_gtsam``, then ``time_posegraph`` from the graph's values and with ``init="auto"``,
-    taking turns for ``rounds`` rounds; the best of each: ((seconds, iterations, error),
-    (seconds, summary), (seconds, summary))."""
+    all with ``method``, taking turns for ``rounds`` rounds; the best of each: ((seconds,
+    iterations, error), (seconds, summary), (seconds, summary))."""
     return taking_turns(
         [
-            lambda: time_gtsam(graph, repeats, budget),
-            lambda: time_posegraph(graph, repeats, "file", budget),
-            lambda: time_posegraph(graph, repeats, "auto", budget),
+            lambda: time_gtsam(graph, repeats, budget, method),
+            lambda: time_posegraph(graph, repeats, "file", budget, method),
+            lambda: time_posegraph(graph, repeats, "auto", budget, method),
         ],
         rounds,
     )
 
 
 def run(
-    files: list[Path], repeats: int, rounds: int = 1, budget: float = 0.0, echo: bool = False
+    files: list[Path],
+    repeats: int,
+    rounds: int = 1,
+    budget: float = 0.0,
+    echo: bool = False,
+    method: str = "lm",
 ) -> str:
-    """Benchmark every file; returns the markdown table, printing it row by row if ``echo``."""
+    """Benchmark every file with ``method`` ("lm" or "dogleg"); returns the markdown table,
+    printing it row by row if ``echo``."""
     table = MarkdownTable(
         "graph | read (ms) | gtsam (ms) | gtsam iters | gtsam error | posegraph (ms) | iters "
         "| posegraph error | rel. diff | time ratio "
@@ -102,7 +122,7 @@ def run(
         graph = read_graph(str(path)).graph
         read_time = time.perf_counter() - start
         (g_time, g_iters, g_error), (p_time, summary), (d_time, defaults) = side_by_side(
-            graph, repeats, rounds, budget
+            graph, repeats, rounds, budget, method
         )
         phases = summary.phase_times
         split = " / ".join(
@@ -122,13 +142,16 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     add_timing_arguments(parser, repeats=3)
     parser.add_argument("--graphs", nargs="*", help="names (without suffix) to run; default all")
+    parser.add_argument(
+        "--method", choices=["lm", "dogleg"], default="lm", help="posegraph's and gtsam's"
+    )
     args = parser.parse_args()
     files = benchmark_files()
     if args.graphs:
         files = [f for f in files if f.stem in args.graphs]
     if not files:
         raise SystemExit("no benchmark graphs found (../shared/datasets or gtsam's Data/)")
-    run(files, args.repeats, args.rounds, args.budget, echo=True)
+    run(files, args.repeats, args.rounds, args.budget, echo=True, method=args.method)
 
 
 if __name__ == "__main__":

@@ -1,4 +1,4 @@
-"""Nonlinear least-squares solvers: Gauss-Newton and Levenberg-Marquardt."""
+"""Nonlinear least-squares solvers: Gauss-Newton, Levenberg-Marquardt and Powell's dogleg."""
 
 from .optimize import MAX_ITERATIONS, STOPPED, TIME_LIMIT, Callback, optimize
 from .options import SolverOptions
