@@ -4,7 +4,7 @@ Odometry (edges between consecutive nodes) is drawn as the trajectory line; loop
 thin lines of a lighter shade; priors (GNSS fixes, say) as crosses at their measured positions.
 Several inputs are overlaid, one colour each (before/after); priors shared with an earlier input
 are drawn once. In a graph that a robust ``optimize`` left, the measurements it rejected
-(``PoseGraph.without_rejected``) are drawn apart: edges dashed in red, priors circled in red.
+(``PoseGraph.rejected``) are drawn apart: edges dashed in red, priors circled in red.
 SE2 graphs are drawn top-down; SE3 and Sim3 in 3D (or top-down with ``view="top"``).
 """
 
