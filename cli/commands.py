@@ -439,9 +439,9 @@ def bench(args: argparse.Namespace) -> int:
         files = [f for f in files if f.stem in args.graphs]
     if not files:
         raise UsageError("no benchmark graphs found (../shared/datasets or gtsam's Data/)")
-    table = run(files, args.repeats, args.rounds, args.budget, echo=_talks(args))
+    table = run(files, args.repeats, args.rounds, args.budget, _talks(args), args.solver)
     if args.json:
-        print(json.dumps({"command": "bench", "table": table}, indent=2))
+        print(json.dumps({"command": "bench", "solver": args.solver, "table": table}, indent=2))
     elif not args.quiet:
         sys.stdout.flush()
     return EXIT_OK

@@ -52,7 +52,8 @@ EXAMPLES = {
   posegraph scale-drift monocular.g2o -o corrected.g2o --convention camera_from_world --json
   posegraph scale-drift place_recognition.g2o -o corrected.tum --robust gnc  # false loops""",
     "bench": """examples:
-  posegraph bench --graphs sphere2500 parking-garage --repeats 3""",
+  posegraph bench --graphs sphere2500 parking-garage --repeats 3
+  posegraph bench --solver dogleg --json""",
 }
 
 
@@ -235,6 +236,12 @@ def _parser() -> argparse.ArgumentParser:
     bench = command("bench", "time posegraph against gtsam on the benchmark graphs", [common])
     add_timing_arguments(bench, repeats=3)
     bench.add_argument("--graphs", nargs="*", metavar="NAME", help="default: all found")
+    bench.add_argument(
+        "--solver",
+        choices=["lm", "dogleg"],
+        default="lm",
+        help="posegraph's and gtsam's: Levenberg-Marquardt (default) or dogleg",
+    )
     return parser
 
 

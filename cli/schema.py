@@ -267,4 +267,13 @@ SCHEMAS = {
             "planar_ate_floor": _NUMBER,
         },
     },
+    "bench": {
+        "type": "object",
+        "required": ["command", "solver", "table"],
+        "properties": {
+            "command": {"const": "bench"},
+            "solver": {"enum": ["lm", "dogleg"]},
+            "table": {"type": "string"},
+        },
+    },
 }

@@ -919,6 +919,19 @@ def test_every_command_succeeds_on_the_benchmark_graphs(tmp_path, shared_dataset
     assert document["summary"]["final_error"] <= document["summary"]["initial_error"]
 
 
+@pytest.mark.parametrize("solver", ["lm", "dogleg"])
+def test_bench_times_posegraph_against_gtsam(shared_dataset, solver):
+    """`posegraph bench` gives a row per graph: both errors, and the time ratio."""
+    shared_dataset("tinyGrid3D.g2o")  # skips without ../shared
+    arguments = ("--graphs", "tinyGrid3D", "--solver", solver, "--repeats", "1", "--budget", "0")
+    table = run_json("bench", *arguments)["table"]
+    (row,) = [line for line in table.splitlines() if line.startswith("| tinyGrid3D.g2o")]
+    cells = [cell.strip() for cell in row.strip("|").split("|")]
+    assert float(cells[4]) == pytest.approx(9.3139, rel=1e-4)  # gtsam's error
+    assert float(cells[7]) == pytest.approx(9.3139, rel=1e-4)  # posegraph's
+    assert float(cells[9]) > 0.0  # the time ratio
+
+
 def test_scale_drift_command(tmp_path):
     source, truth, _ = monocular_file(tmp_path)
     out, figure = tmp_path / "corrected.tum", tmp_path / "drift.png"
