@@ -6,6 +6,7 @@ import warnings
 
 import numpy as np
 import pytest
+from posegraph_datasets.outliers import add_false_loops
 
 import posegraph
 from posegraph.factors import linearize_between, linearize_priors
@@ -17,7 +18,14 @@ from posegraph.solvers.optimize import NOT_FINITE
 from posegraph.solvers.options import DEFAULT_INITIAL_DAMPING
 from posegraph.sparse_cholesky import available_backends
 
-from .conftest import POSE_GROUPS, gnss_track, random_graph, sim3_scale_chain, union
+from .conftest import (
+    POSE_GROUPS,
+    city_with_fixes,
+    gnss_track,
+    random_graph,
+    sim3_scale_chain,
+    union,
+)
 
 
 def _gradient_norm(graph, values, held):
@@ -102,6 +110,26 @@ def test_dogleg_factorises_once_per_linearisation_and_shrinks_its_region_on_reje
     monkeypatch.undo()
     lm = optimize(graph, SolverOptions(method="lm", **tight))
     assert dogleg.summary.final_error == pytest.approx(lm.summary.final_error, rel=1e-9)
+
+
+def test_gnc_over_the_dogleg_rejects_what_it_rejects_over_levenberg_marquardt():
+    """GNC's stages and final solve run with the method asked for: over the dogleg, the same
+    false loops and false fixes are rejected, and the TLS cost is the same."""
+    graph, false_fixes = city_with_fixes(0.3, seed=0)
+    corrupted, false_loops = add_false_loops(graph, 0.1, seed=0)
+    runs = {
+        method: posegraph.optimize(
+            corrupted.copy(),
+            options=SolverOptions(method=method),
+            robust="gnc",
+            robust_priors=True,
+        ).summary
+        for method in ("lm", "dogleg")
+    }
+    for summary in runs.values():
+        assert summary.rejected_edges == np.flatnonzero(false_loops).tolist()
+        assert summary.rejected_priors == np.flatnonzero(false_fixes).tolist()
+    assert runs["dogleg"].final_error == pytest.approx(runs["lm"].final_error, rel=1e-8)
 
 
 @pytest.mark.parametrize("backend", available_backends())
