@@ -331,7 +331,14 @@ def eval(args: argparse.Namespace) -> int:  # noqa: A001 - the subcommand's name
     estimate = inputs.trajectory(args.estimate)
     truth = inputs.trajectory(args.ground_truth)
     with _about(args.estimate, args.ground_truth):  # they do not pair, say
-        evaluation = evaluate(estimate, truth, args.align, args.delta, args.max_time_difference)
+        evaluation = evaluate(
+            estimate,
+            truth,
+            args.align,
+            args.delta,
+            args.max_time_difference,
+            tuple(args.segment_lengths),
+        )
     if args.plot:
         from posegraph.plotting import plot_trajectories
 

@@ -16,7 +16,7 @@ import warnings
 
 import posegraph
 from posegraph.benchmarks.timing import add_timing_arguments, at_least
-from posegraph.evaluation import MAX_KEY_DIFFERENCE
+from posegraph.evaluation import KITTI_SEGMENT_LENGTHS, MAX_KEY_DIFFERENCE
 from posegraph.initialization import INITIALIZERS
 from posegraph.io.tags import EDGE2_ORDERS
 from posegraph.solvers.options import METHODS
@@ -205,6 +205,15 @@ def _parser() -> argparse.ArgumentParser:
         metavar="SECONDS",
         help=f"pair poses whose time stamps differ by at most this (default {MAX_KEY_DIFFERENCE}, "
         "as the TUM benchmark's associate.py); node ids and KITTI lines pair when equal",
+    )
+    ev.add_argument(
+        "--segment-lengths",
+        type=float,
+        nargs="+",
+        default=list(KITTI_SEGMENT_LENGTHS),
+        metavar="LENGTH",
+        help="path lengths of the drift's segments, in the trajectories' unit (default the KITTI"
+        " benchmark's 100 200 … 800)",
     )
     ev.add_argument("--plot", metavar="FIG.png")
 

@@ -15,6 +15,16 @@ _STATS = {
         "count": {"type": "integer"},
     },
 }
+_DRIFT = {
+    "type": "object",
+    "required": ["lengths", "segments", "translation_percent", "rotation_deg_per_100m"],
+    "properties": {
+        "lengths": {"type": "array", "items": {"type": "number"}},
+        "segments": {"type": "integer", "minimum": 1},
+        "translation_percent": _NUMBER,
+        "rotation_deg_per_100m": _NUMBER,
+    },
+}
 _PATH_OR_NULL = {"type": ["string", "null"]}
 _SKIPPED_LINES = {
     "type": "array",
@@ -251,6 +261,9 @@ SCHEMAS = {
             "rpe_translation",
             "rpe_rotation_deg",
             "planar_ate_floor",
+            "segment_lengths",
+            "drift",
+            "drift_by_length",
             "skipped_lines",
         ],
         "properties": {
@@ -265,6 +278,9 @@ SCHEMAS = {
             "rpe_translation": _STATS,
             "rpe_rotation_deg": _STATS,
             "planar_ate_floor": _NUMBER,
+            "segment_lengths": {"type": "array", "items": {"type": "number"}},
+            "drift": {"oneOf": [_DRIFT, {"type": "null"}]},
+            "drift_by_length": {"type": "array", "items": _DRIFT},
         },
     },
     "bench": {

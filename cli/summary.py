@@ -228,9 +228,26 @@ def format_evaluation(e: Evaluation) -> str:
         row("RPE translation", e.rpe_translation, ""),
         row("RPE rotation", e.rpe_rotation_deg, "°"),
     ]
+    if e.drift is None:
+        lines.append(
+            f"  {'drift':<16} no segment fits: the ground truth's path is shorter than"
+            f" {min(e.segment_lengths):g} (--segment-lengths)"
+        )
+    else:
+        lines.append(
+            f"  {'drift':<16} translation {e.drift.translation_percent:.4g}%  rotation"
+            f" {e.drift.rotation_deg_per_100m:.4g}°/100 over {e.drift.segments} segments of"
+            f" {_lengths(e.drift.lengths)} (KITTI's metric)"
+        )
     if e.planar_ate_floor is not None:
         lines.append(
             f"  {'ATE floor':<16} rmse {e.planar_ate_floor:.6g}  (the estimate is planar: the"
             " ground truth's RMS distance from its plane, below which no planar ATE can go)"
         )
     return "\n".join(lines)
+
+
+def _lengths(lengths: tuple[float, ...]) -> str:
+    """ "100–800" of the segment lengths, or the one length."""
+    low, high = min(lengths), max(lengths)
+    return f"{low:g}" if low == high else f"{low:g}–{high:g}"

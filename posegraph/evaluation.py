@@ -11,6 +11,8 @@ benchmark; Zhang & Scaramuzza 2018, "A Tutorial on Quantitative Trajectory Evalu
 * A planar estimate (a 2D graph, lifted to z = 0) cannot follow a ground truth that leaves its
   plane: whatever the alignment, its ATE RMSE is at least the ground truth's RMS distance from
   its least-squares plane, which is reported.
+* Drift over path segments, the KITTI odometry benchmark's metric (Geiger, Lenz & Urtasun
+  2012; its devkit's ``evaluate_odometry.cpp``): ``segment_drift``.
 """
 
 from __future__ import annotations
@@ -22,6 +24,12 @@ import numpy as np
 from .alignment import umeyama
 from .lie import SE3, Sim3
 from .trajectory_io import Trajectory
+
+KITTI_SEGMENT_LENGTHS = (100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0, 800.0)
+"""The KITTI odometry benchmark's segment lengths, in the trajectories' unit (metres)."""
+
+KITTI_STEP = 10
+"""Segments start at every 10th pose, as the KITTI devkit's."""
 
 MAX_KEY_DIFFERENCE = 0.02
 """Largest key difference of a pair: 0.02 s of time stamps, the TUM RGB-D benchmark's default.
@@ -49,6 +57,18 @@ class ErrorStatistics:
 
 
 @dataclasses.dataclass(frozen=True)
+class Drift:
+    """Relative error per unit of path over segments (``segment_drift``): the translation
+    error as a percentage of the segment's length, the rotation error in degrees per 100
+    units, averaged over ``segments`` segments of the ``lengths``."""
+
+    lengths: tuple[float, ...]
+    segments: int
+    translation_percent: float
+    rotation_deg_per_100m: float
+
+
+@dataclasses.dataclass(frozen=True)
 class Evaluation:
     """ATE and RPE of an estimate against ground truth, and the alignment used."""
 
@@ -64,6 +84,12 @@ class Evaluation:
     planar_ate_floor: float | None
     """When the estimate is planar and the ground truth is not (``planar_ate_floor``), the
     lowest ATE RMSE that a planar estimate can reach; else None."""
+    segment_lengths: tuple[float, ...]
+    drift: Drift | None
+    """Over the segments of all ``segment_lengths`` (``segment_drift``); None where no segment
+    fits in the ground truth's path."""
+    drift_by_length: tuple[Drift, ...]
+    """Per length that a segment fits."""
 
     def as_dict(self) -> dict:
         return {
@@ -76,6 +102,9 @@ class Evaluation:
             "rpe_translation": dataclasses.asdict(self.rpe_translation),
             "rpe_rotation_deg": dataclasses.asdict(self.rpe_rotation_deg),
             "planar_ate_floor": self.planar_ate_floor,
+            "segment_lengths": list(self.segment_lengths),
+            "drift": None if self.drift is None else dataclasses.asdict(self.drift),
+            "drift_by_length": [dataclasses.asdict(d) for d in self.drift_by_length],
         }
 
 
@@ -111,13 +140,17 @@ def evaluate(
     alignment: str = "se3",
     delta: int = 1,
     max_difference: float = MAX_KEY_DIFFERENCE,
+    segment_lengths: tuple[float, ...] = KITTI_SEGMENT_LENGTHS,
 ) -> Evaluation:
-    """ATE after ``alignment`` ("se3", "sim3" or "none") and RPE over ``delta`` poses, over the
-    poses paired by ``associate``."""
+    """ATE after ``alignment`` ("se3", "sim3" or "none"), RPE over ``delta`` poses and the drift
+    over path segments of ``segment_lengths`` (``segment_drift``), over the poses paired by
+    ``associate``."""
     if alignment not in ("se3", "sim3", "none"):
         raise ValueError(f"alignment is 'se3', 'sim3' or 'none', not {alignment!r}")
     if not max_difference >= 0:
         raise ValueError(f"the largest key difference must be 0 or more, not {max_difference}")
+    if not all(length > 0 for length in segment_lengths):
+        raise ValueError(f"segment lengths must be positive, not {list(segment_lengths)}")
     index_est, index_gt = associate(estimate, truth, max_difference)
     if index_est.size < 3:
         raise ValueError(
@@ -151,6 +184,7 @@ def evaluate(
     error = relative_gt.between(relative_est)
     rpe_t = np.linalg.norm(error.translation, axis=1)
     rpe_r = np.degrees(np.linalg.norm(error.log()[:, 3:], axis=1))
+    by_length = segment_drift(gt, aligned, segment_lengths)
     return Evaluation(
         alignment,
         transform,
@@ -162,6 +196,59 @@ def evaluate(
         max_difference,
         aligned,
         planar_ate_floor(est.translation, gt.translation),
+        tuple(float(length) for length in segment_lengths),
+        _pooled(by_length),
+        tuple(by_length),
+    )
+
+
+def segment_drift(
+    truth: SE3, estimate: SE3, lengths: tuple[float, ...] = KITTI_SEGMENT_LENGTHS
+) -> list[Drift]:
+    """Per segment length L, the KITTI odometry benchmark's errors (its devkit's
+    ``calcSequenceErrors``): from every ``KITTI_STEP``-th pose f, the first later pose l whose
+    distance along the ground truth's path from f exceeds L; of E = Δ_est⁻¹ Δ_gt, Δ = X_f⁻¹ X_l,
+    the translation ‖t_E‖ / L and the rotation angle ∠R_E / L, averaged over those segments.
+    Lengths that no segment fits (the path is shorter) are left out."""
+    path = np.concatenate(
+        [[0.0], np.cumsum(np.linalg.norm(np.diff(truth.translation, axis=0), axis=1))]
+    )
+    first = np.arange(0, len(path), KITTI_STEP)
+    drift = []
+    for length in lengths:
+        last = np.searchsorted(path, path[first] + length, side="right")
+        start, end = first[last < len(path)], last[last < len(path)]
+        if not start.size:
+            continue
+        error = estimate[start].between(estimate[end]).between(truth[start].between(truth[end]))
+        translation = np.linalg.norm(error.translation, axis=1) / length
+        rotation = np.linalg.norm(error.log()[:, 3:], axis=1) / length
+        drift.append(
+            Drift(
+                (float(length),),
+                int(start.size),
+                100.0 * float(translation.mean()),
+                100.0 * float(np.degrees(rotation.mean())),
+            )
+        )
+    return drift
+
+
+def _pooled(by_length: list[Drift]) -> Drift | None:
+    """The drift over the segments of every length together (the KITTI devkit's average), or
+    None if there are none."""
+    if not by_length:
+        return None
+    weights = np.array([d.segments for d in by_length], float)
+
+    def mean(values) -> float:
+        return float(np.average(values, weights=weights))
+
+    return Drift(
+        tuple(length for d in by_length for length in d.lengths),
+        int(weights.sum()),
+        mean([d.translation_percent for d in by_length]),
+        mean([d.rotation_deg_per_100m for d in by_length]),
     )
 
 

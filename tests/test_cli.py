@@ -919,6 +919,37 @@ def test_every_command_succeeds_on_the_benchmark_graphs(tmp_path, shared_dataset
     assert document["summary"]["final_error"] <= document["summary"]["initial_error"]
 
 
+def test_eval_gives_the_drift_over_path_segments(tmp_path):
+    """Over 20 and 40 m, the bundled sphere (160 poses on 10 m rings) gets the drift, pooled
+    and per length, as ``segment_drift`` gives it; no segment of 10 km fits, which the report
+    says; and a length that is not positive is refused."""
+    from posegraph_datasets.generators import sphere
+
+    from posegraph.evaluation import segment_drift
+    from posegraph.trajectory_io import Trajectory, write_trajectory
+
+    _, truth = sphere(rings=8, poses_per_ring=20, seed=2)
+    truth_path = tmp_path / "truth.tum"
+    write_trajectory(Trajectory(np.arange(160.0), truth), str(truth_path), "tum")
+    too_long = ("--segment-lengths", "10000")
+    assert run_json("eval", EXAMPLE, truth_path, *too_long)["drift"] is None
+    text = run("eval", EXAMPLE, truth_path, *too_long).stdout
+    assert "drift            no segment fits: the ground truth's path is shorter than 10000" in text
+    document = run_json("eval", EXAMPLE, truth_path, "--segment-lengths", "20", "40")
+    assert document["segment_lengths"] == [20.0, 40.0]
+    assert [d["lengths"] for d in document["drift_by_length"]] == [[20.0], [40.0]]
+    estimate = read_graph(EXAMPLE).graph
+    aligned = Trajectory.of_graph(estimate)  # se3-aligned drift equals unaligned drift
+    expected = segment_drift(truth, aligned.poses, (20.0, 40.0))
+    for got, want in zip(document["drift_by_length"], expected, strict=True):
+        assert got["segments"] == want.segments
+        assert got["translation_percent"] == pytest.approx(want.translation_percent, rel=1e-9)
+    text = run("eval", EXAMPLE, truth_path, "--segment-lengths", "20", "40").stdout
+    assert f"over {document['drift']['segments']} segments of 20–40 (KITTI's metric)" in text
+    refused = run("eval", EXAMPLE, truth_path, "--segment-lengths", "0", check_exit=2)
+    assert "segment lengths must be positive, not [0.0]" in refused.stderr
+
+
 @pytest.mark.parametrize("solver", ["lm", "dogleg"])
 def test_bench_times_posegraph_against_gtsam(shared_dataset, solver):
     """`posegraph bench` gives a row per graph: both errors, and the time ratio."""

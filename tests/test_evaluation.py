@@ -139,3 +139,66 @@ def test_no_alignment_takes_a_planar_estimate_below_the_floor():
     other_plane = _planar(rng.normal(size=(40, 2)), SE3.sample(rng))
     planar_truth = Trajectory(keys, SE3(truth.poses.rotation, other_plane))
     assert evaluate(estimate, planar_truth).planar_ate_floor is None  # both planar
+
+
+def _straight_line(count: int, rotation: np.ndarray | None = None) -> Trajectory:
+    """Poses 1 m apart along x, keyed 0, 1, …; with ``rotation`` (count, 3, 3) as their
+    orientations (else the identity)."""
+    translation = np.zeros((count, 3))
+    translation[:, 0] = np.arange(count)
+    if rotation is None:
+        rotation = np.tile(np.eye(3), (count, 1, 1))
+    return Trajectory(np.arange(count, dtype=float), SE3(rotation, translation))
+
+
+def test_drift_of_a_stretched_path_is_its_stretch():
+    """1001 poses along 1000 m, the estimate 1% longer and not aligned: a segment of length L
+    runs from pose f (every 10th) to pose f + L + 1, the first whose distance exceeds L (the
+    KITTI devkit's rule), so its translation error is 1% of L + 1 m, and its rotation error 0.
+    Starts up to 999 − L fit. Pooled, the lengths weigh by their segments. Sim3 alignment
+    removes the stretch."""
+    truth = _straight_line(1001)
+    stretched = Trajectory(truth.keys, SE3(truth.poses.rotation, 1.01 * truth.poses.translation))
+    drift = evaluate(stretched, truth, "none").drift_by_length
+    lengths = np.arange(100.0, 900.0, 100.0)
+    assert [d.lengths for d in drift] == [(length,) for length in lengths]
+    counts = [d.segments for d in drift]
+    assert counts == [(999 - int(length)) // 10 + 1 for length in lengths]
+    expected = (lengths + 1) / lengths  # per cent
+    np.testing.assert_allclose([d.translation_percent for d in drift], expected, rtol=1e-9)
+    np.testing.assert_allclose([d.rotation_deg_per_100m for d in drift], 0.0, atol=1e-12)
+    pooled = evaluate(stretched, truth, "none").drift
+    assert pooled.segments == sum(counts)
+    assert pooled.translation_percent == pytest.approx(np.average(expected, weights=counts))
+    aligned = evaluate(stretched, truth, "sim3").drift
+    assert aligned.translation_percent < 1e-9
+
+
+def test_drift_of_a_turning_heading_is_its_rate():
+    """The estimate's heading turns 0.001 rad per pose where the truth's stays: a segment of
+    L + 1 poses turns by 0.001 (L + 1) rad, which per 100 m of L is the rotation drift."""
+    rate, truth = 0.001, _straight_line(1001)
+    yaw = rate * np.arange(1001)
+    rotation = np.zeros((1001, 3, 3))
+    rotation[:, 0, 0] = rotation[:, 1, 1] = np.cos(yaw)
+    rotation[:, 0, 1], rotation[:, 1, 0] = -np.sin(yaw), np.sin(yaw)
+    rotation[:, 2, 2] = 1.0
+    turning = _straight_line(1001, rotation)
+    drift = evaluate(turning, truth, "none", segment_lengths=(100.0, 400.0)).drift_by_length
+    for d, length in zip(drift, (100.0, 400.0), strict=True):
+        assert d.rotation_deg_per_100m == pytest.approx(
+            100.0 * np.degrees(rate * (length + 1) / length), rel=1e-9
+        )
+
+
+def test_no_segment_fits_a_path_shorter_than_every_length():
+    """A 50 m path has no drift over KITTI's 100–800 m; over 10 and 20 m it has. Lengths must
+    be positive."""
+    truth = _straight_line(51)
+    assert evaluate(truth, truth).drift is None
+    assert evaluate(truth, truth).drift_by_length == ()
+    short = evaluate(truth, truth, segment_lengths=(10.0, 20.0, 100.0))
+    assert short.drift.lengths == (10.0, 20.0) and short.drift.translation_percent < 1e-12
+    assert short.segment_lengths == (10.0, 20.0, 100.0)
+    with pytest.raises(ValueError, match=r"segment lengths must be positive, not \[10.0, 0.0\]"):
+        evaluate(truth, truth, segment_lengths=(10.0, 0.0))
