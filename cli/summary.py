@@ -236,7 +236,7 @@ def format_evaluation(e: Evaluation) -> str:
     else:
         lines.append(
             f"  {'drift':<16} translation {e.drift.translation_percent:.4g}%  rotation"
-            f" {e.drift.rotation_deg_per_100m:.4g}°/100 over {e.drift.segments} segments of"
+            f" {e.drift.rotation_deg_per_100m:.4g}°/100 m over {e.drift.segments} segments of"
             f" {_lengths(e.drift.lengths)} (KITTI's metric)"
         )
     if e.planar_ate_floor is not None:

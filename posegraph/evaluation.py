@@ -149,7 +149,7 @@ def evaluate(
         raise ValueError(f"alignment is 'se3', 'sim3' or 'none', not {alignment!r}")
     if not max_difference >= 0:
         raise ValueError(f"the largest key difference must be 0 or more, not {max_difference}")
-    if not all(length > 0 for length in segment_lengths):
+    if not segment_lengths or not all(length > 0 for length in segment_lengths):
         raise ValueError(f"segment lengths must be positive, not {list(segment_lengths)}")
     index_est, index_gt = associate(estimate, truth, max_difference)
     if index_est.size < 3:

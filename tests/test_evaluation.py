@@ -202,3 +202,5 @@ def test_no_segment_fits_a_path_shorter_than_every_length():
     assert short.segment_lengths == (10.0, 20.0, 100.0)
     with pytest.raises(ValueError, match=r"segment lengths must be positive, not \[10.0, 0.0\]"):
         evaluate(truth, truth, segment_lengths=(10.0, 0.0))
+    with pytest.raises(ValueError, match=r"segment lengths must be positive, not \[\]"):
+        evaluate(truth, truth, segment_lengths=())
