@@ -42,32 +42,35 @@ def _new_axes(three_d: bool):
     return figure, axes
 
 
-def _draw(axes, three_d: bool, positions, loops, color, label) -> None:
+def _add_lines(axes, three_d: bool, segments: np.ndarray, **style) -> None:
+    """Segments (k, 2, 3) as one collection, in 3D or top-down."""
     dims = 3 if three_d else 2
-    points = positions[:, :dims]
+    collection_class = Line3DCollection if three_d else LineCollection
+    axes.add_collection(collection_class(segments[:, :, :dims], **style))
+
+
+def _draw(axes, three_d: bool, positions, loops, color, label) -> None:
     if loops is not None and len(loops):
-        collection = (Line3DCollection if three_d else LineCollection)(
-            loops[:, :, :dims], colors=color, linewidths=0.4, alpha=0.35
-        )
-        axes.add_collection(collection)
-    axes.plot(*points.T, color=color, linewidth=1.0, label=label)
+        _add_lines(axes, three_d, loops, colors=color, linewidths=0.4, alpha=0.35)
+    axes.plot(*positions[:, : 3 if three_d else 2].T, color=color, linewidth=1.0, label=label)
 
 
 def _draw_rejected(axes, three_d: bool, segments: np.ndarray, fixes: np.ndarray) -> None:
-    """The edges (``segments``) and the priors' positions (``fixes``) a robust run rejected."""
-    dims = 3 if three_d else 2
+    """The edges (``segments``) and the priors' positions (``fixes``, in the figure's dimensions)
+    that a robust run rejected."""
     if len(segments):
-        collection = (Line3DCollection if three_d else LineCollection)(
-            segments[:, :, :dims],
+        _add_lines(
+            axes,
+            three_d,
+            segments,
             colors=REJECTED_COLOR,
             linewidths=0.6,
             linestyles="dashed",
             label=f"{len(segments)} rejected edges",
         )
-        axes.add_collection(collection)
     if len(fixes):
         axes.scatter(
-            *fixes[:, :dims].T,
+            *fixes.T,
             marker="o",
             s=60,
             facecolors="none",

@@ -440,7 +440,7 @@ class _Dogleg:
 
     damped = True
 
-    def __init__(self, options: SolverOptions, diagonal: np.ndarray) -> None:
+    def __init__(self, options: SolverOptions) -> None:
         self.options = options
         self.radius: float | None = None
         self.unmeasured = None
@@ -536,9 +536,10 @@ class _Dogleg:
 _STEPS = {
     "lm": _LevenbergMarquardt,
     "gn": functools.partial(_LevenbergMarquardt, damped=False),
-    "dogleg": _Dogleg,
+    "dogleg": lambda options, diagonal: _Dogleg(options),
 }
-"""The step strategy of each ``SolverOptions.method``."""
+"""The step strategy of each ``SolverOptions.method``, from the options and diag(H) at the
+start (Levenberg-Marquardt's identity damping scales λ by its largest entry)."""
 
 
 def _singular_termination(graph: PoseGraph) -> str:
