@@ -193,7 +193,9 @@ def _parser() -> argparse.ArgumentParser:
     plot.add_argument("--view", choices=["auto", "top", "3d"], default="auto")
     plot.add_argument("--title")
 
-    ev = command("eval", "ATE and RPE of an estimate against ground truth", [common, reading])
+    ev = command(
+        "eval", "ATE, RPE and KITTI drift of an estimate against ground truth", [common, reading]
+    )
     ev.add_argument("estimate", help="g2o, TORO, TUM or KITTI")
     ev.add_argument("ground_truth", help="g2o, TORO, TUM or KITTI")
     ev.add_argument("--align", choices=["se3", "sim3", "none"], default="se3", help="default: se3")

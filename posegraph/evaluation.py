@@ -70,7 +70,8 @@ class Drift:
 
 @dataclasses.dataclass(frozen=True)
 class Evaluation:
-    """ATE and RPE of an estimate against ground truth, and the alignment used."""
+    """ATE, RPE and drift over path segments of an estimate against ground truth, and the
+    alignment used."""
 
     alignment: str
     alignment_transform: Sim3
