@@ -86,11 +86,14 @@ class Evaluation:
     """When the estimate is planar and the ground truth is not (``planar_ate_floor``), the
     lowest ATE RMSE that a planar estimate can reach; else None."""
     segment_lengths: tuple[float, ...]
-    drift: Drift | None
-    """Over the segments of all ``segment_lengths`` (``segment_drift``); None where no segment
-    fits in the ground truth's path."""
     drift_by_length: tuple[Drift, ...]
-    """Per length that a segment fits."""
+    """Per length that a segment fits (``segment_drift``)."""
+
+    @property
+    def drift(self) -> Drift | None:
+        """Over the segments of all lengths together (the KITTI devkit's average), or None
+        where no segment fits in the ground truth's path."""
+        return _pooled(self.drift_by_length)
 
     def as_dict(self) -> dict:
         return {
@@ -180,27 +183,32 @@ def evaluate(
         s * np.einsum("ij,nj->ni", transform.rotation, est.translation) + transform.translation,
     )
     ate = np.linalg.norm(gt.translation - aligned.translation, axis=1)
-    relative_gt = gt[:-delta].between(gt[delta:])
-    relative_est = aligned[:-delta].between(aligned[delta:])
-    error = relative_gt.between(relative_est)
-    rpe_t = np.linalg.norm(error.translation, axis=1)
-    rpe_r = np.degrees(np.linalg.norm(error.log()[:, 3:], axis=1))
-    by_length = segment_drift(gt, aligned, segment_lengths)
+    steps = np.arange(index_est.size - delta)
+    rpe_t, rpe_r = relative_pose_errors(gt, aligned, steps, steps + delta)
     return Evaluation(
         alignment,
         transform,
         ErrorStatistics.of(ate),
         ErrorStatistics.of(rpe_t),
-        ErrorStatistics.of(rpe_r),
+        ErrorStatistics.of(np.degrees(rpe_r)),
         int(index_est.size),
         len(estimate.keys),
         max_difference,
         aligned,
         planar_ate_floor(est.translation, gt.translation),
         tuple(float(length) for length in segment_lengths),
-        _pooled(by_length),
-        tuple(by_length),
+        tuple(segment_drift(gt, aligned, segment_lengths)),
     )
+
+
+def relative_pose_errors(
+    truth: SE3, estimate: SE3, start: np.ndarray, end: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per pair of indices, the translation norm and rotation angle (radians) of the error
+    between the motions Δ = X_start⁻¹ X_end of the truth and of the estimate: Δ_gt⁻¹ Δ_est (the
+    RPE's), whose norm and angle are those of its inverse Δ_est⁻¹ Δ_gt (the KITTI devkit's)."""
+    error = truth[start].between(truth[end]).between(estimate[start].between(estimate[end]))
+    return np.linalg.norm(error.translation, axis=1), np.linalg.norm(error.log()[:, 3:], axis=1)
 
 
 def segment_drift(
@@ -221,21 +229,19 @@ def segment_drift(
         start, end = first[last < len(path)], last[last < len(path)]
         if not start.size:
             continue
-        error = estimate[start].between(estimate[end]).between(truth[start].between(truth[end]))
-        translation = np.linalg.norm(error.translation, axis=1) / length
-        rotation = np.linalg.norm(error.log()[:, 3:], axis=1) / length
+        translation, rotation = relative_pose_errors(truth, estimate, start, end)
         drift.append(
             Drift(
                 (float(length),),
                 int(start.size),
-                100.0 * float(translation.mean()),
-                100.0 * float(np.degrees(rotation.mean())),
+                100.0 * float(translation.mean()) / length,
+                100.0 * float(np.degrees(rotation.mean())) / length,
             )
         )
     return drift
 
 
-def _pooled(by_length: list[Drift]) -> Drift | None:
+def _pooled(by_length: tuple[Drift, ...]) -> Drift | None:
     """The drift over the segments of every length together (the KITTI devkit's average), or
     None if there are none."""
     if not by_length:
