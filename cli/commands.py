@@ -146,11 +146,11 @@ def _output_graph(
     and how the report names the file."""
     if not args.drop_rejected:
         return graph, args.output
-    edges, priors = graph.rejected()
-    left_out = f"{np.count_nonzero(edges)} rejected edge(s)"
-    if priors.any():
-        left_out += f" and {np.count_nonzero(priors)} rejected prior(s)"
-    return graph.without_rejected(), f"{args.output} (without the {left_out})"
+    inliers = graph.without_rejected()
+    left_out = f"{graph.num_edges - inliers.num_edges} rejected edge(s)"
+    if len(inliers.priors) < len(graph.priors):
+        left_out += f" and {len(graph.priors) - len(inliers.priors)} rejected prior(s)"
+    return inliers, f"{args.output} (without the {left_out})"
 
 
 def _check_writable(

@@ -15,6 +15,7 @@ import traceback
 import warnings
 
 import posegraph
+from posegraph.benchmarks.optimizer import METHODS as BENCHMARK_METHODS
 from posegraph.benchmarks.timing import add_timing_arguments, at_least
 from posegraph.evaluation import KITTI_SEGMENT_LENGTHS, MAX_KEY_DIFFERENCE
 from posegraph.initialization import INITIALIZERS
@@ -249,7 +250,7 @@ def _parser() -> argparse.ArgumentParser:
     bench.add_argument("--graphs", nargs="*", metavar="NAME", help="default: all found")
     bench.add_argument(
         "--solver",
-        choices=["lm", "dogleg"],
+        choices=BENCHMARK_METHODS,
         default="lm",
         help="posegraph's and gtsam's: Levenberg-Marquardt (default) or dogleg",
     )

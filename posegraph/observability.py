@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse
-import scipy.sparse.csgraph
 
 from .factors import Linearization, between_jacobians, relative_poses
 from .graph import PoseGraph, named_nodes, start_information
@@ -134,9 +133,7 @@ def tied_by_full_rank(graph: PoseGraph) -> bool:
     the free nodes is undetermined (module docstring)."""
     full = ~_unmeasured(np.linalg.eigvalsh(graph.edges.information)).any(axis=1)
     full_priors = ~_unmeasured(np.linalg.eigvalsh(graph.priors.information)).any(axis=1)
-    n, edges = graph.num_nodes, graph.edges
-    ties = scipy.sparse.coo_matrix((np.ones(full.sum()), (edges.i[full], edges.j[full])), (n, n))
-    _, labels = scipy.sparse.csgraph.connected_components(ties, directed=False)
+    labels = graph.with_edges(full).components()
     anchored = np.zeros(labels.max(initial=-1) + 1, dtype=bool)
     anchored[labels[graph.gauge_nodes()]] = True
     anchored[labels[graph.priors.i[full_priors]]] = True

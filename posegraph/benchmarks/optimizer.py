@@ -28,6 +28,9 @@ from ..solvers import SolverOptions, Summary
 from .table import MarkdownTable
 from .timing import add_timing_arguments, best_run, taking_turns
 
+METHODS = ("lm", "dogleg")
+"""The methods benchmarked, each against gtsam's own: Levenberg-Marquardt and the dogleg."""
+
 
 def benchmark_files() -> list[Path]:
     """The shared benchmark graphs and gtsam's w10000.graph and sphere2500.txt, where present."""
@@ -142,9 +145,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     add_timing_arguments(parser, repeats=3)
     parser.add_argument("--graphs", nargs="*", help="names (without suffix) to run; default all")
-    parser.add_argument(
-        "--method", choices=["lm", "dogleg"], default="lm", help="posegraph's and gtsam's"
-    )
+    parser.add_argument("--method", choices=METHODS, default="lm", help="posegraph's and gtsam's")
     args = parser.parse_args()
     files = benchmark_files()
     if args.graphs:
