@@ -353,6 +353,12 @@ def _damping_scale(
     return scale
 
 
+def _unmeasured_share(graph: PoseGraph, system) -> np.ndarray:
+    """Each free coordinate's share of directions that nothing measures at first order
+    (``observability.unmeasured_share``; module docstring), in ``system``'s variable order."""
+    return system.gather(unmeasured_share(graph))
+
+
 class _LevenbergMarquardt:
     """Steps from (H + λD) δ = −g, with λ updated by the gain ratio (module docstring); with
     ``damped`` False, Gauss-Newton (λ = 0): a rejected step ends the run."""
@@ -419,7 +425,7 @@ class _LevenbergMarquardt:
         if not np.isfinite(self.lam) or self.lam > self.options.max_diagonal:
             return "damping exceeded its limit (no step lowers the error)"
         if self.unmeasured is None and self.options.damping == "diagonal":
-            self.unmeasured = system.gather(unmeasured_share(graph))
+            self.unmeasured = _unmeasured_share(graph, system)
         return None
 
 
@@ -475,7 +481,7 @@ class _Dogleg:
         nothing measures if H does not factorise."""
         self._gauss_newton = self._solve(system, data, gradient, diagonal, clock)
         if self._gauss_newton is None and self.unmeasured is None:
-            self.unmeasured = system.gather(unmeasured_share(graph))
+            self.unmeasured = _unmeasured_share(graph, system)
             self._gauss_newton = self._solve(system, data, gradient, diagonal, clock)
         self._stale = False
         self._hessian = system.matrix(data)
@@ -528,7 +534,7 @@ class _Dogleg:
         if not (np.isfinite(self.radius) and self.radius > 0.0):
             return "trust region collapsed (no step lowers the error)"
         if self.unmeasured is None and self.options.damping == "diagonal":
-            self.unmeasured = system.gather(unmeasured_share(graph))
+            self.unmeasured = _unmeasured_share(graph, system)
             self._stale = bool(self.unmeasured.any())
         return None
 
