@@ -607,7 +607,7 @@ class PoseGraph:
         other.initialized = self.initialized[nodes]
         other._index_of = dict(zip(other.node_ids.tolist(), range(other.num_nodes), strict=True))
         other.edges = dataclasses.replace(kept, i=index[kept.i], j=index[kept.j])
-        other.priors = dataclasses.replace(priors, i=index[priors.i])
+        other.priors = dataclasses.replace(priors, i=index[priors.i], j=index[priors.j])
         inside_pairs = np.isin(self.equivalences, other.node_ids).all(axis=1)
         other.equivalences = self.equivalences[inside_pairs]
         return other

@@ -303,6 +303,7 @@ def test_a_subgraph_keeps_its_nodes_in_order_with_the_edges_among_them():
     )
     prior_inside = nodes[graph.priors.i]
     np.testing.assert_array_equal(sub.node_ids[sub.priors.i], ids[graph.priors.i[prior_inside]])
+    np.testing.assert_array_equal(sub.priors.j, sub.priors.i)  # a prior's ends are one node
     chosen = np.zeros(graph.num_edges, dtype=bool)
     chosen[np.flatnonzero(inside)[:2]] = True
     assert sub.num_edges > 2 and graph.subgraph(nodes, edges=chosen).num_edges == 2
