@@ -5,8 +5,9 @@ order in which they were added. Edges are stored stacked: index arrays ``i``, ``
 measurements and (…, d, d) information matrices over the tangent of CONVENTIONS.md.
 A between edge i → j measures Z ≈ Xᵢ⁻¹ Xⱼ; a prior on i measures Z ≈ Xᵢ.
 
-The graph grows in place (``add_nodes``, ``add_edges``, ``add_priors``, ``fix``) and keeps its
-values, so a back end can extend it and optimise again from the last solution.
+The graph grows in place (``add_nodes``, ``add_edges``, ``add_priors``, ``fix``), shrinks
+(``remove_edges``, ``remove_priors``, ``remove_nodes``) and keeps its values, so a back end can
+edit it and optimise again from the last solution.
 """
 
 from __future__ import annotations
@@ -230,6 +231,33 @@ class Solution:
             flags[indices] = True
             rejected.append(_carried(measured, solved, flags, False))
         return rejected[0], rejected[1]
+
+
+def _removal_mask(given, count: int, noun: str) -> np.ndarray:
+    """A mask over ``count`` measurements (``noun``: "edge", "prior") from indices (negative
+    ones count from the end) or a boolean mask; ``ValueError`` saying what is wrong otherwise."""
+    given = np.asarray(given)
+    if given.dtype == bool:
+        if given.shape != (count,):
+            article = "an" if noun[0] in "aeiou" else "a"
+            raise ValueError(
+                f"{article} {noun} mask has {count} entries, one per {noun}, not {given.shape}"
+            )
+        return given
+    indices = np.atleast_1d(given)
+    if indices.ndim != 1 or (indices.size and indices.dtype.kind not in "iu"):
+        raise ValueError(
+            f"{noun}s are removed by integer indices or a boolean mask, not by {given.dtype} of"
+            f" shape {given.shape}"
+        )
+    outside = (indices < -count) | (indices >= count)
+    if outside.any():
+        raise ValueError(
+            f"{noun} index {indices[outside][0]} is out of range: the graph has {count} {noun}s"
+        )
+    mask = np.zeros(count, dtype=bool)
+    mask[indices.astype(np.int64)] = True
+    return mask
 
 
 def _carried(measured: EdgeSet, solved: EdgeSet, values: np.ndarray, added) -> np.ndarray:
@@ -615,30 +643,39 @@ class PoseGraph:
     def remove_edges(self, edges) -> None:
         """Remove between edges given by index (negative ones count from the end) or where a
         boolean mask over the edges holds; indices of later edges shift down."""
-        count = self.num_edges
-        given = np.asarray(edges)
-        if given.dtype == bool:
-            if given.shape != (count,):
-                raise ValueError(
-                    f"an edge mask has {count} entries, one per edge, not {given.shape}"
-                )
-            remove = given
-        else:
-            indices = np.atleast_1d(given)
-            if indices.ndim != 1 or (indices.size and indices.dtype.kind not in "iu"):
-                raise ValueError(
-                    f"edges are removed by integer indices or a boolean mask, not by {given.dtype} "
-                    f"of shape {given.shape}"
-                )
-            outside = (indices < -count) | (indices >= count)
-            if outside.any():
-                raise ValueError(
-                    f"edge index {indices[outside][0]} is out of range: the graph has {count} edges"
-                )
-            remove = np.zeros(count, dtype=bool)
-            remove[indices.astype(np.int64)] = True
-        self.edges = self.edges.subset(~remove)
+        self.edges = self.edges.subset(~_removal_mask(edges, self.num_edges, "edge"))
         self.structure_version += 1
+
+    def remove_priors(self, priors) -> None:
+        """Remove priors given by index (negative ones count from the end) or where a boolean
+        mask over the priors holds (a GNSS fix found wrong); indices of later priors shift
+        down."""
+        self.priors = self.priors.subset(~_removal_mask(priors, len(self.priors), "prior"))
+        self.structure_version += 1
+
+    def remove_nodes(self, node_ids) -> tuple[np.ndarray, np.ndarray]:
+        """Remove nodes (ids) with every between edge and prior on them, as g2o's
+        ``removeVertex`` does (a back end culling a keyframe); ``KeyError`` names an id not in
+        the graph, and nothing is removed then. The other nodes keep their values, ids, holds
+        and order; indices of later nodes, edges and priors shift down. Returns masks over the
+        edges and over the priors as they were: those removed with the nodes.
+
+        A node that joined parts of the graph leaves them apart unless an edge re-links them
+        (for a culled keyframe, the composition of the two edges through it, its information
+        from ``lie.uncertainty.compose_covariance``). The next ``posegraph.optimize`` starts
+        from the values that remain; as after ``remove_edges``, it forgets the last robust
+        run's decisions once a measurement went or moved (``Solution.weights_for``)."""
+        removed = np.zeros(self.num_nodes, dtype=bool)
+        removed[self.index(node_ids)] = True
+        edges = removed[self.edges.i] | removed[self.edges.j]
+        priors = removed[self.priors.i]
+        remaining = self.subgraph(~removed)
+        for name, stack in self._stacks.items():
+            stack.set(getattr(remaining, name))
+        self._index_of = remaining._index_of
+        self.equivalences = remaining.equivalences
+        self.structure_version += 1
+        return edges, priors
 
     def fix(self, node_ids, fixed: bool = True) -> None:
         """Hold nodes at their current values (or release them with ``fixed=False``)."""

@@ -13,6 +13,7 @@ from posegraph_datasets.paths import gtsam_data_dir, shared_datasets_dir
 import posegraph
 from posegraph.graph import PoseGraph
 from posegraph.lie import SE2, SE3, LieGroup, Sim3
+from posegraph.lie.uncertainty import compose_covariance
 
 
 @pytest.fixture(scope="session")
@@ -81,6 +82,24 @@ def union(first: PoseGraph, second: PoseGraph, id_offset: int) -> PoseGraph:
             ids[part.edges.i], ids[part.edges.j], part.edges.measurements, part.edges.information
         )
     return graph
+
+
+def cull(graph: PoseGraph, node_id: int) -> None:
+    """Remove a keyframe of a chain of ids, re-linking its neighbours by the composition of
+    the edges (k − 1 → k, k → k + 1) through it, its covariance by Eade §8.2."""
+    ids, edges = graph.node_ids, graph.edges
+    starts, ends = ids[edges.i], ids[edges.j]
+    into = np.flatnonzero((starts == node_id - 1) & (ends == node_id))[0]
+    out = np.flatnonzero((starts == node_id) & (ends == node_id + 1))[0]
+    z_into, z_out = edges.measurements[into], edges.measurements[out]
+    covariance = compose_covariance(
+        z_into,
+        np.linalg.inv(edges.information[into]),
+        z_out,
+        np.linalg.inv(edges.information[out]),
+    )
+    graph.add_edge(node_id - 1, node_id + 1, z_into @ z_out, np.linalg.inv(covariance))
+    graph.remove_nodes([node_id])
 
 
 SCALE_STEP = Sim3.exp(np.array([0, 0, 0, 0, 0, 0, 200.0]))

@@ -24,7 +24,7 @@ from posegraph.linear import NormalEquations
 from posegraph.solvers import STOPPED
 from posegraph.sparse_cholesky import COUPLED_COLUMNS, SOLVED_COLUMNS, NotPositiveDefinite
 
-from .conftest import city_with_fixes, random_graph
+from .conftest import city_with_fixes, cull, random_graph
 
 
 def test_batch_and_single_editing_with_arrays():
@@ -238,6 +238,89 @@ def test_edges_are_removed_by_index_or_mask_and_counts_must_agree():
     ):
         graph.add_edges([0, 1], [2, 3], SE2.identity((3,)), np.eye(3))
     assert graph.num_edges == 1
+
+
+def test_priors_are_removed_by_index_or_mask_and_counts_must_agree():
+    graph = random_graph(SE2, 8, 0, seed=84, priors=5)
+    before = graph.priors
+    graph.remove_priors([1, -1])
+    assert graph.priors.i.tolist() == before.i[[0, 2, 3]].tolist()
+    assert graph.priors.measurements.same_as(before.measurements[[0, 2, 3]])
+    graph.remove_priors(np.array([True, False, True]))
+    assert graph.priors.i.tolist() == [before.i[2]]
+    for priors, message in [
+        ([1], "prior index 1 is out of range: the graph has 1 priors"),
+        ([True, False], r"a prior mask has 1 entries, one per prior, not \(2,\)"),
+        (["0"], "priors are removed by integer indices or a boolean mask, not by <U1"),
+    ]:
+        with pytest.raises(ValueError, match=message):
+            graph.remove_priors(priors)
+    assert len(graph.priors) == 1 and graph.num_edges == 7
+
+
+def test_removing_nodes_takes_their_edges_and_priors_and_keeps_the_rest_in_order():
+    """What remains is what a graph built without those nodes holds: compared by node id,
+    edge by edge and prior by prior, with the masks of what went."""
+    graph = random_graph(SE3, 12, 10, seed=83, priors=5)
+    ids = graph.node_ids.copy()
+    graph.fix(ids[[0, 7]])
+    graph.add_node(99)  # without a value
+    graph.equivalences = np.array([[ids[1], ids[3]], [ids[2], ids[5]]])
+    before = graph.copy()
+    culled = ids[[3, 7, 8]]
+    edges, priors = graph.remove_nodes([culled[2], culled[0], culled[1], culled[0]])
+    gone = np.isin(before.node_ids, culled)
+    np.testing.assert_array_equal(edges, gone[before.edges.i] | gone[before.edges.j])
+    np.testing.assert_array_equal(priors, gone[before.priors.i])
+    assert 0 < edges.sum() < before.num_edges and 0 < priors.sum() < len(before.priors)
+    np.testing.assert_array_equal(graph.node_ids, before.node_ids[~gone])
+    assert graph.values.same_as(before.values[~gone])
+    assert graph.fixed.tolist() == before.fixed[~gone].tolist()
+    assert graph.initialized.tolist() == [True] * 9 + [False]
+    for now, then, kept in (
+        (graph.edges, before.edges, ~edges),
+        (graph.priors, before.priors, ~priors),
+    ):
+        np.testing.assert_array_equal(graph.node_ids[now.i], before.node_ids[then.i[kept]])
+        np.testing.assert_array_equal(graph.node_ids[now.j], before.node_ids[then.j[kept]])
+        assert now.measurements.same_as(then.measurements[kept])
+        np.testing.assert_array_equal(now.information, then.information[kept])
+    assert graph.equivalences.tolist() == [[ids[2], ids[5]]]
+    assert not graph.has_node(ids[3]) and graph.index([ids[9], 99]).tolist() == [6, 9]
+    with pytest.raises(KeyError, match=f"node {ids[3]} is not in the graph"):
+        graph.remove_nodes([ids[4], ids[3]])
+    assert graph.num_nodes == 10 and graph.has_node(ids[4])
+    graph.add_node(ids[3], SE3.identity())  # its id is free again
+    assert graph.index(ids[3]) == 10
+
+
+def test_after_culling_keyframes_a_warm_start_ends_where_a_fresh_solve_does():
+    """Keyframes culled from an optimised map (their neighbours re-linked), and a pose added:
+    the warm start ends at a fresh solve's optimum, by least squares and by GNC, and is not
+    taken for the old solution extended (the culled nodes' loops changed the problem). GNC's
+    decisions are forgotten, as after ``remove_edges``, and it rejects again what a fresh GNC
+    rejects: the false loops that remain."""
+    clean, _ = manhattan_world(200, seed=3)
+    noisy, false = add_false_loops(clean, 0.1, seed=3)
+    culled = [60, 94, 130]  # 94 ends a false loop
+    ends = noisy.node_ids[noisy.edges.i], noisy.node_ids[noisy.edges.j]
+    touching = np.isin(ends[0], culled) | np.isin(ends[1], culled)
+    for graph, robust in ((clean, None), (noisy, "gnc")):
+        posegraph.optimize(graph, robust=robust)
+        for node in culled:
+            cull(graph, node)
+        assert not graph.rejected()[0].any()
+        graph.add_node(500)
+        graph.add_edge(199, 500, SE2.from_xytheta([1.0, 0.0, 0.0]), np.eye(3) * 100)
+        warm = posegraph.optimize(graph.copy(), robust=robust).summary
+        fresh = posegraph.optimize(graph.copy(), init="chordal", robust=robust).summary
+        assert warm.initialization == "warm start" and warm.termination != COMPOSED
+        assert warm.final_error == pytest.approx(fresh.final_error, rel=1e-6), robust
+        assert warm.rejected_edges == fresh.rejected_edges
+    # The edges that remain come first, in order, then the re-links and the new odometry.
+    assert (false & touching).any() and warm.rejected_edges == np.flatnonzero(
+        false[~touching]
+    ).tolist()
 
 
 @pytest.mark.parametrize("group", [SE2, SE3, Sim3])

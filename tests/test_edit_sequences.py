@@ -1,5 +1,5 @@
 """Random sequences of what a SLAM back end does to one graph (add nodes with and without
-values, edges, priors; hold and release nodes; remove edges; optimise, by least squares or
+values, edges, priors; hold and release nodes; remove edges, priors and nodes; optimise, by least squares or
 robustly; read covariances), drawn by hypothesis: every call either works or is refused with a
 ValueError, and each least-squares call that warm-starts from the last ends no higher than a
 fresh solve of a copy, which rebuilds everything (a sequence fuzzer found an IndexError in the
@@ -28,10 +28,14 @@ edge = st.tuples(st.just("edge"), st.floats(0, 1), st.floats(0, 1), st.sampled_f
 prior = st.tuples(st.just("prior"), st.floats(0, 1))
 hold = st.tuples(st.just("hold"), st.floats(0, 1), st.booleans())
 remove = st.tuples(st.just("remove"), st.floats(0, 1))
+unprior = st.tuples(st.just("unprior"), st.floats(0, 1))
+cull = st.tuples(st.just("cull"), st.floats(0, 1))
 solve = st.tuples(st.just("optimize"), st.sampled_from([None, None, "huber", "gnc"]))
 covariances = st.tuples(st.just("marginals"), st.booleans())
 steps = st.lists(
-    st.one_of(node, node, edge, edge, prior, hold, remove, solve, solve, covariances),
+    st.one_of(
+        node, node, edge, edge, prior, hold, remove, unprior, cull, solve, solve, covariances
+    ),
     min_size=1,
     max_size=14,
 )
@@ -47,7 +51,7 @@ def _apply(graph: PoseGraph, step: tuple, rng: np.random.Generator) -> None:
     kind = step[0]
     if kind == "node":
         value = group.exp(0.3 * rng.normal(size=d)) if step[1] else None
-        graph.add_node(graph.num_nodes, value)
+        graph.add_node(int(graph.node_ids.max(initial=-1)) + 1, value)
     elif kind == "edge" and graph.num_nodes >= 2:
         i, j = _pick(graph, step[1]), _pick(graph, step[2])
         if i != j:
@@ -59,6 +63,10 @@ def _apply(graph: PoseGraph, step: tuple, rng: np.random.Generator) -> None:
         graph.fix([_pick(graph, step[1])], step[2])
     elif kind == "remove" and graph.num_edges:
         graph.remove_edges([min(int(step[1] * graph.num_edges), graph.num_edges - 1)])
+    elif kind == "unprior" and len(graph.priors):
+        graph.remove_priors([min(int(step[1] * len(graph.priors)), len(graph.priors) - 1)])
+    elif kind == "cull" and graph.num_nodes:
+        graph.remove_nodes([_pick(graph, step[1])])
     elif kind == "optimize":
         fresh = graph.copy() if step[1] is None else None  # before the warm call changes it
         warm = posegraph.optimize(graph, robust=step[1]).summary

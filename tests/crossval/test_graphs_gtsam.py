@@ -15,7 +15,7 @@ from posegraph.lie import SE2, SE3, Sim3
 from posegraph.linear import NormalEquations
 from posegraph.solvers import SolverOptions, optimize
 
-from ..conftest import random_graph
+from ..conftest import cull, random_graph
 
 gtsam = pytest.importorskip("gtsam")
 bridge = pytest.importorskip("posegraph.validation.gtsam_bridge")
@@ -170,6 +170,22 @@ def _gtsam_optimum(graph) -> float:
     factors, values = bridge.graph_to_gtsam(graph)
     result = gtsam.LevenbergMarquardtOptimizer(factors, values).optimize()
     return factors.error(result)
+
+
+def test_a_map_with_culled_keyframes_reaches_gtsams_optimum_of_what_remains():
+    """Keyframes culled from an optimised SE3 map (``remove_nodes``, each one's neighbours
+    re-linked): the warm-started solve ends at gtsam LM's optimum of the graph that remains,
+    from the same values."""
+    graph, _ = sphere(rings=8, poses_per_ring=20, seed=5)
+    posegraph.optimize(graph)
+    for node in (25, 50, 75, 101):
+        cull(graph, node)
+    assert graph.num_nodes == 156 and not graph.has_node(50)
+    factors, values = bridge.graph_to_gtsam(graph)
+    theirs = factors.error(gtsam.LevenbergMarquardtOptimizer(factors, values).optimize())
+    ours = posegraph.optimize(graph).summary
+    assert ours.initialization == "warm start" and ours.iterations
+    assert ours.final_error == pytest.approx(theirs, rel=1e-6)
 
 
 @pytest.mark.parametrize(
