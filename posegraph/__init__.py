@@ -6,7 +6,7 @@ from .api import optimize
 from .graph import PoseGraph
 from .io import GraphFileError, ReadOptions, read_graph, write_graph
 from .lie import SE2, SE3, SO2, SO3, Sim3
-from .marginals import marginals
+from .marginals import marginals, relative_covariances
 from .scale_drift import correct_scale_drift
 from .solvers import Result, SolverOptions
 
@@ -30,5 +30,6 @@ __all__ = [
     "marginals",
     "optimize",
     "read_graph",
+    "relative_covariances",
     "write_graph",
 ]

@@ -734,10 +734,14 @@ class PoseGraph:
         Nodes marked fixed are held. A connected component with no fixed node and no prior
         has its lowest-id node held, which fixes its gauge (and, for Sim3, its scale).
         """
-        free = ~self._components_holding(self.fixed) & ~self._components_holding(self.priors.i)
         held = self.fixed.copy()
-        held[self.component_roots()[free]] = True
+        held[self.component_roots()[~self.components_in_world_frame()]] = True
         return np.flatnonzero(held)
+
+    def components_in_world_frame(self) -> np.ndarray:
+        """Per component label, whether a held node or a prior sets it in the world frame
+        (else ``gauge_nodes`` holds its lowest-id node, and its frame is that node's)."""
+        return self._components_holding(self.fixed) | self._components_holding(self.priors.i)
 
     def components_set_by_priors(self) -> np.ndarray:
         """Per component label, whether its priors set its gauge: it has priors and no fixed

@@ -79,12 +79,75 @@ def marginals(
     several nodes together (``observability.undetermined_direction``: a map that can turn about
     the position-only edges that join it to the rest), at the cost of one more factorisation.
     """
+    index = graph.index(nodes)
+    groups = index[None, :] if joint else index[:, None]
+    values = _values(graph, values)
+    covariances = _group_covariances(graph, groups, values, linear_solver, require_measured)
+    return covariances[0] if joint else covariances
+
+
+def relative_covariances(
+    graph: PoseGraph,
+    i_ids,
+    j_ids,
+    values: LieGroup | None = None,
+    linear_solver: str = "auto",
+    require_measured: bool = False,
+) -> np.ndarray:
+    """Covariances (k, d, d) of the relative poses Xᵢ⁻¹ Xⱼ of k node pairs (ids), over the
+    tangent δ of Ẑ · Exp(δ), Ẑ = X̂ᵢ⁻¹ X̂ⱼ at ``values`` (right perturbation, CONVENTIONS.md):
+    what a loop-closure search gates a candidate pair by.
+
+    From Xᵢ⁻¹ Xⱼ = Exp(−δᵢ) Ẑ Exp(δⱼ) = Ẑ Exp(−Ad(Ẑ⁻¹) δᵢ) Exp(δⱼ) (Eade §8.2–8.3, to first
+    order), Σ = J Σᵢⱼ Jᵀ with J = [−Ad(Ẑ⁻¹), I] and Σᵢⱼ the pair's joint covariance
+    (``marginals``, whose options and refusals these are, computed for every pair in one
+    factorisation). Unlike each node's covariance, this does not depend on which node holds
+    the gauge. A pair in different connected components is refused (``ValueError``) unless
+    both components are set in the world frame (by a held node or a prior)."""
+    i, j = graph.index(i_ids), graph.index(j_ids)
+    if i.size != j.size:
+        raise ValueError(f"pairs need as many i as j ids, not {i.size} and {j.size}")
+    labels, framed = graph.components(), graph.components_in_world_frame()
+    apart = np.flatnonzero((labels[i] != labels[j]) & ~(framed[labels[i]] & framed[labels[j]]))
+    if apart.size:
+        ids = graph.node_ids
+        k = apart[0]
+        raise ValueError(
+            f"nodes {ids[i[k]]} and {ids[j[k]]} are in different connected components, not both"
+            " set in the world frame by a held node or a prior: nothing measures their relative"
+            " pose"
+        )
+    values = _values(graph, values)
+    joint = _group_covariances(
+        graph, np.stack([i, j], axis=1), values, linear_solver, require_measured
+    )
+    d = graph.group.dof
+    relative = values[i].between(values[j])
+    jacobian = np.concatenate(
+        [-relative.inverse().adjoint(), np.broadcast_to(np.eye(d), (i.size, d, d))], axis=2
+    )
+    return jacobian @ joint @ np.swapaxes(jacobian, 1, 2)
+
+
+def _values(graph: PoseGraph, values: LieGroup | None) -> LieGroup:
+    """``values``, one per node, or the graph's (which must all be set)."""
     if values is None:
         graph.require_values("optimise the graph first (covariances are taken at its values)")
-        values = graph.values
-    elif values.batch_shape != (graph.num_nodes,):
+        return graph.values
+    if values.batch_shape != (graph.num_nodes,):
         raise ValueError(f"values are one per node ({graph.num_nodes}), not {values.batch_shape}")
-    index = graph.index(nodes)
+    return values
+
+
+def _group_covariances(
+    graph: PoseGraph,
+    groups: np.ndarray,
+    values: LieGroup,
+    linear_solver: str,
+    require_measured: bool,
+) -> np.ndarray:
+    """The joint covariances (G, k·d, k·d) of G groups of k node indices (G, k) at ``values``,
+    as ``marginals`` describes them."""
     if graph.solution is not None:
         edge_weights, prior_weights = graph.solution.weights_for(graph.edges, graph.priors)
         if np.any(edge_weights != 1.0) or np.any(prior_weights != 1.0):
@@ -93,7 +156,6 @@ def marginals(
         direction = undetermined_direction(graph, values, linear_solver)
         if direction is not None:
             raise singular_information(graph, direction=direction)
-    groups = index[None, :] if joint else index[:, None]
     # Solves serve any factor, so the last least-squares solve's normal equations do (a back
     # end reading its newest pose's covariance after each step), and H itself where that solve
     # assembled it at these values; for selected inversion, new ones (supernodal, coupled) grow
@@ -101,7 +163,7 @@ def marginals(
     system, held = graph.current_system(linear_solver), graph.gauge_nodes()
     d = graph.group.dof
     assembled = None
-    if not covariance_by_solves(index.size * d, groups.shape[1] * d):
+    if not covariance_by_solves(groups.size * d, groups.shape[1] * d):
         system = NormalEquations(graph, held, linear_solver, covariance_of=groups, previous=system)
     elif system is None:
         previous = graph.last_system(linear_solver)
@@ -115,5 +177,4 @@ def marginals(
             factorize_information(system, assembled, least_share=SINGULAR)
     except NotPositiveDefinite:
         raise singular_information(graph, values) from None
-    covariances = joint_covariances(system, groups)
-    return covariances[0] if joint else covariances
+    return joint_covariances(system, groups)

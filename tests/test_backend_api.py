@@ -20,11 +20,12 @@ from posegraph.factors import between_squares, linearize_between, linearize_prio
 from posegraph.graph import PoseGraph
 from posegraph.io import read_graph, write_graph
 from posegraph.lie import SE2, SE3, SO3, Sim3
+from posegraph.lie.uncertainty import compose_covariance, inverse_covariance
 from posegraph.linear import NormalEquations
 from posegraph.solvers import STOPPED
 from posegraph.sparse_cholesky import COUPLED_COLUMNS, SOLVED_COLUMNS, NotPositiveDefinite
 
-from .conftest import city_with_fixes, cull, random_graph
+from .conftest import city_with_fixes, cull, random_graph, union
 
 
 def test_batch_and_single_editing_with_arrays():
@@ -1165,3 +1166,80 @@ def test_marginals_are_blocks_of_the_inverse_information(
     graph.add_edge(int(graph.node_ids[0]), 99, SE3.identity(), np.eye(6))
     with pytest.raises(ValueError, match=r"nodes \[99\] have no values; optimise the graph first"):
         posegraph.marginals(graph, [99])
+
+
+@pytest.mark.parametrize("group", [SE2, SE3, Sim3])
+def test_relative_covariances_along_a_tree_compose_its_measurements_covariances(group):
+    """Where one path of edges joins two nodes (a chain, at its optimum: every residual zero),
+    the covariance of their relative pose is that of the path's composed measurements, by
+    Eade §8.2 applied edge after edge (and §8.3 for the reverse pair), whichever node holds
+    the gauge."""
+    rng = np.random.default_rng(86)
+    d = group.dof
+    measurements = group.exp(0.4 * rng.normal(size=(5, d)))
+    a = rng.normal(size=(5, d, d))
+    information = a @ np.swapaxes(a, 1, 2) + d * np.eye(d)
+    graph = PoseGraph(group)
+    graph.add_nodes(range(6))
+    graph.add_edges(range(5), range(1, 6), measurements, information)
+    posegraph.optimize(graph)
+    path, covariance = measurements[1], np.linalg.inv(information[1])
+    for k in (2, 3):
+        step = np.linalg.inv(information[k])
+        covariance = compose_covariance(path, covariance, measurements[k], step)
+        path = path @ measurements[k]
+    for held in (0, 5):
+        graph.fix(graph.node_ids, False)
+        graph.fix([held])
+        relative = posegraph.relative_covariances(graph, [1, 4, held, 2], [4, 1, 3, 2])
+        np.testing.assert_allclose(relative[0], covariance, rtol=1e-8, atol=1e-12)
+        reverse = inverse_covariance(path, covariance)
+        np.testing.assert_allclose(relative[1], reverse, rtol=1e-8, atol=1e-12)
+        # From a held node, the marginal; a node against itself, none.
+        np.testing.assert_allclose(relative[2], posegraph.marginals(graph, [3])[0], rtol=1e-8)
+        np.testing.assert_allclose(relative[3], 0.0, atol=1e-12 * np.abs(covariance).max())
+
+
+def test_relative_covariances_do_not_depend_on_the_gauge_where_marginals_do():
+    """Held at another node, a Manhattan world's poses have other covariances, and their
+    relative poses the same ones (1e-9), by solves and by selected inversion."""
+    graph, _ = manhattan_world(200, seed=87)
+    posegraph.optimize(graph)
+    regauged = graph.copy()
+    regauged.fix([0], False)
+    regauged.fix([120])
+    rng = np.random.default_rng(87)
+    for count in (3, 40):  # 18 columns by solves; 240 by selected inversion
+        i, j = rng.choice(graph.node_ids, (2, count))
+        ours, theirs = (posegraph.relative_covariances(g, i, j) for g in (graph, regauged))
+        np.testing.assert_allclose(theirs, ours, rtol=1e-9, atol=1e-12 * np.abs(ours).max())
+        marginal = posegraph.marginals(graph, j)
+        assert not np.allclose(posegraph.marginals(regauged, j), marginal, rtol=1e-3)
+
+
+def test_relative_covariances_need_a_measured_relative_pose():
+    """Two maps apart: their nodes' relative pose is refused, unless a hold or a prior sets
+    each map in the world frame; pairs of unequal counts are refused."""
+    first, second = (random_graph(SE2, 6, 2, seed=s) for s in (88, 89))
+    graph = union(first, second, id_offset=1000)
+    posegraph.optimize(graph)
+    a, b = int(first.node_ids[2]), int(second.node_ids[3]) + 1000
+    assert posegraph.relative_covariances(graph, [a], [int(first.node_ids[4])]).shape == (1, 3, 3)
+    message = rf"nodes {a} and {b} are in different connected components, not both set"
+    with pytest.raises(ValueError, match=message):
+        posegraph.relative_covariances(graph, [a], [b])
+    graph.fix([int(first.node_ids[0])])
+    with pytest.raises(ValueError, match=message):
+        posegraph.relative_covariances(graph, [a], [b])
+    graph.add_prior(b, graph.values_of([b])[0], np.eye(3))
+    posegraph.optimize(graph)
+    apart = posegraph.relative_covariances(graph, [a], [b])[0]
+    # Held and fixed apart, the two poses are independent: Eade §8.2 of their marginals.
+    x_a, x_b = graph.values_of([a]), graph.values_of([b])
+    marginal = posegraph.marginals(graph, [a, b])
+    expected = compose_covariance(
+        x_a.inverse()[0], inverse_covariance(x_a[0], marginal[0]), x_b[0], marginal[1]
+    )
+    np.testing.assert_allclose(apart, expected, rtol=1e-9)
+    with pytest.raises(ValueError, match="as many i as j ids, not 1 and 2"):
+        posegraph.relative_covariances(graph, [a], [a, b])
