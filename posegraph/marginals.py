@@ -121,11 +121,7 @@ def relative_covariances(
     joint = _group_covariances(
         graph, np.stack([i, j], axis=1), values, linear_solver, require_measured
     )
-    d = graph.group.dof
-    relative = values[i].between(values[j])
-    jacobian = np.concatenate(
-        [-relative.inverse().adjoint(), np.broadcast_to(np.eye(d), (i.size, d, d))], axis=2
-    )
+    jacobian = np.concatenate(values[i].between_with_jacobians(values[j])[1:], axis=2)
     return jacobian @ joint @ np.swapaxes(jacobian, 1, 2)
 
 

@@ -1,10 +1,11 @@
 """Random sequences of what a SLAM back end does to one graph (add nodes with and without
-values, edges, priors; hold and release nodes; remove edges, priors and nodes; optimise, by least squares or
-robustly; read covariances), drawn by hypothesis: every call either works or is refused with a
-ValueError, and each least-squares call that warm-starts from the last ends no higher than a
-fresh solve of a copy, which rebuilds everything (a sequence fuzzer found an IndexError in the
-growth of an all-held graph's sparsity pattern this way). A call that composed new nodes
-without a solve (``COMPOSED``) ends no higher than a solve from its values either."""
+values, edges, priors; hold and release nodes; remove edges, priors and nodes; optimise, by
+least squares or robustly; read covariances, also of relative poses), drawn by hypothesis:
+every call either works or is refused with a ValueError, and each least-squares call that
+warm-starts from the last ends no higher than a fresh solve of a copy, which rebuilds
+everything (a sequence fuzzer found an IndexError in the growth of an all-held graph's
+sparsity pattern this way). A call that composed new nodes without a solve (``COMPOSED``)
+ends no higher than a solve from its values either."""
 
 from __future__ import annotations
 
@@ -80,6 +81,8 @@ def _apply(graph: PoseGraph, step: tuple, rng: np.random.Generator) -> None:
     elif kind == "marginals" and graph.num_nodes and graph.optimized:
         covariance = posegraph.marginals(graph, graph.node_ids[:3], joint=step[1])
         assert np.isfinite(covariance).all()
+        ends = graph.node_ids[[0, -1]]  # refused (ValueError) where nothing relates them
+        assert np.isfinite(posegraph.relative_covariances(graph, ends[:1], ends[1:])).all()
 
 
 @pytest.mark.parametrize("group", [SE2, SE3, Sim3], ids=lambda g: g.__name__)
