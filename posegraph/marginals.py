@@ -1,4 +1,5 @@
-"""Marginal covariances of chosen nodes from the sparse factorisation of the information matrix.
+"""Marginal covariances of chosen nodes, and of the relative poses of node pairs, from the sparse
+factorisation of the information matrix.
 
 At the estimate X̂, the Gaussian approximation of the posterior has information H = Σ Jᵀ Ω J over
 the free nodes' tangents, with right perturbation X = X̂ · Exp(δ) (CONVENTIONS.md). The
@@ -9,7 +10,8 @@ factor on the paths from those nodes to the root of its elimination tree. A join
 of up to ``COUPLED_COLUMNS`` columns puts the blocks between its nodes into H's pattern (as
 zeros), so that they lie in the factor's; a larger one comes from solves. Held nodes (the
 gauge) have zero covariance: everything is relative to them, as in gtsam with a tight prior on
-the gauge node.
+the gauge node. A relative pose's covariance is its pair's joint covariance mapped through the
+derivative of Xᵢ⁻¹Xⱼ; it does not depend on the gauge.
 """
 
 from __future__ import annotations
