@@ -355,7 +355,8 @@ def _previous_decisions(graph: PoseGraph, label: str, measured: np.ndarray) -> n
     grown graph: the edges (and priors, where the problem holds them) that the run kept, and
     every measurement appended since. None unless that run solved the same problem to its end
     (the kernel ``label``, and the robust class ``measured`` the same over its measurements)
-    and the graph has only grown since: its measurements come first and unchanged."""
+    and the graph has only grown since: its measurements come first and unchanged (those that
+    remain, after ``PoseGraph``'s removals: ``Solution.without``)."""
     solution = graph.solution
     if solution.gnc is None or solution.gnc[0] != label:
         return None
@@ -394,13 +395,15 @@ def _standing_decisions(graph: PoseGraph, decisions: np.ndarray, measured: np.nd
 
 def _grew_by_a_tree(graph: PoseGraph) -> bool:
     """Whether all that was added to the graph since its last solution is a tree of between
-    edges that hangs the new nodes off the solved ones: the solution's edges and priors come
-    first and unchanged, and no prior, no hold and no cycle is new. Each new node then has one
-    place that fits its edges exactly, and the problem over the solved nodes is as it was."""
+    edges that hangs the new nodes off the solved ones: the solution is an optimum (nothing
+    was removed since: ``Solution.optimal``), its edges and priors come first and unchanged,
+    and no prior, no hold and no cycle is new. Each new node then has one place that fits its
+    edges exactly, and the problem over the solved nodes is as it was."""
     solution = graph.solution
     old, new_edges = len(solution.fixed), slice(len(solution.edges), None)
     return (
-        graph.edges.starts_with(solution.edges)
+        solution.optimal
+        and graph.edges.starts_with(solution.edges)
         and len(graph.priors) == len(solution.priors)
         and graph.priors.starts_with(solution.priors)
         and np.array_equal(graph.fixed[:old], solution.fixed)

@@ -177,6 +177,10 @@ class EdgeSet:
     def subset(self, keep: np.ndarray) -> EdgeSet:
         return EdgeSet(self.i[keep], self.j[keep], self.measurements[keep], self.information[keep])
 
+    def reindexed(self, index: np.ndarray) -> EdgeSet:
+        """The same measurements on nodes renumbered by ``index`` (old index → new)."""
+        return dataclasses.replace(self, i=index[self.i], j=index[self.j])
+
     def weighted(self, weights: np.ndarray) -> EdgeSet:
         """The edges of positive weight, each information matrix times its weight."""
         kept = weights > 0
@@ -207,11 +211,42 @@ class Solution:
     and which measurements were under it (the between edges, then the priors where they were
     too); None in least squares, with an IRLS kernel, or where the run stopped early. A later
     call may carry its decisions (``posegraph.api``)."""
+    optimal: bool = True
+    """Whether ``values`` are the optimum over ``edges`` and ``priors``: False once a removal
+    left what remains of it (``without``), so that a later call solves again."""
+
+    def without(self, nodes: np.ndarray, edges: np.ndarray, priors: np.ndarray) -> Solution:
+        """What remains of this solution once the nodes, edges and priors where these masks
+        (over its own) hold were removed: the other measurements, renumbered, with their
+        weights, rejections and GNC problem, and the values and holds of the other nodes. The
+        values are no longer an optimum (``optimal``)."""
+        index = np.cumsum(~nodes) - 1
+        summary = dataclasses.replace(
+            self.summary,
+            rejected_edges=_kept_indices(self.summary.rejected_edges, edges),
+            rejected_priors=_kept_indices(self.summary.rejected_priors, priors),
+        )
+        gnc = None
+        if self.gnc is not None:  # its mask covers the edges, then the priors if they were in
+            label, measured = self.gnc
+            gnc = (label, measured[np.concatenate([~edges, ~priors])[: measured.size]])
+        return Solution(
+            self.edges.subset(~edges).reindexed(index),
+            self.priors.subset(~priors).reindexed(index),
+            self.edge_weights[~edges],
+            self.prior_weights[~priors],
+            self.fixed[~nodes],
+            self.values[~nodes],
+            summary,
+            gnc,
+            optimal=False,
+        )
 
     def weights_for(self, edges: EdgeSet, priors: EdgeSet) -> tuple[np.ndarray, np.ndarray]:
         """The weights of ``edges`` and of ``priors``: the solution's for the measurements it was
         found over, if they still come first and unchanged, and 1 for those added since (1 for
-        all of a kind if some of it were removed or changed)."""
+        all of a kind if some of it were changed, or removed other than by ``PoseGraph``'s
+        removals, which carry the solution: ``without``)."""
         return (
             _carried(edges, self.edges, self.edge_weights, 1.0),
             _carried(priors, self.priors, self.prior_weights, 1.0),
@@ -220,8 +255,8 @@ class Solution:
     def rejected_for(self, edges: EdgeSet, priors: EdgeSet) -> tuple[np.ndarray, np.ndarray]:
         """Masks over ``edges`` and over ``priors`` of the measurements that this solution's
         robust run rejected (``summary.rejected_edges`` and ``rejected_priors``), by the rule of
-        ``weights_for``: none of those added since (none of a kind if some of it were removed
-        or changed)."""
+        ``weights_for``: none of those added since (none of a kind if some of it were changed,
+        or removed other than by ``PoseGraph``'s removals)."""
         rejected = []
         for measured, solved, indices in (
             (edges, self.edges, self.summary.rejected_edges),
@@ -231,6 +266,12 @@ class Solution:
             flags[indices] = True
             rejected.append(_carried(measured, solved, flags, False))
         return rejected[0], rejected[1]
+
+
+def _kept_indices(indices: list[int], removed: np.ndarray) -> list[int]:
+    """``indices`` into a sequence, renumbered for the sequence without the ``removed`` ones."""
+    renumbered = np.cumsum(~removed) - 1
+    return [int(renumbered[k]) for k in indices if not removed[k]]
 
 
 def _removal_mask(given, count: int, noun: str) -> np.ndarray:
@@ -634,23 +675,28 @@ class PoseGraph:
         other.fixed = self.fixed[nodes]
         other.initialized = self.initialized[nodes]
         other._index_of = dict(zip(other.node_ids.tolist(), range(other.num_nodes), strict=True))
-        other.edges = dataclasses.replace(kept, i=index[kept.i], j=index[kept.j])
-        other.priors = dataclasses.replace(priors, i=index[priors.i], j=index[priors.j])
+        other.edges = kept.reindexed(index)
+        other.priors = priors.reindexed(index)
         inside_pairs = np.isin(self.equivalences, other.node_ids).all(axis=1)
         other.equivalences = self.equivalences[inside_pairs]
         return other
 
     def remove_edges(self, edges) -> None:
         """Remove between edges given by index (negative ones count from the end) or where a
-        boolean mask over the edges holds; indices of later edges shift down."""
-        self.edges = self.edges.subset(~_removal_mask(edges, self.num_edges, "edge"))
+        boolean mask over the edges holds; indices of later edges shift down. The last
+        solution's weights and rejections stay with the edges that remain (``Solution.without``)."""
+        removed = _removal_mask(edges, self.num_edges, "edge")
+        self._carry_solution(edges=removed)
+        self.edges = self.edges.subset(~removed)
         self.structure_version += 1
 
     def remove_priors(self, priors) -> None:
         """Remove priors given by index (negative ones count from the end) or where a boolean
         mask over the priors holds (a GNSS fix found wrong); indices of later priors shift
-        down."""
-        self.priors = self.priors.subset(~_removal_mask(priors, len(self.priors), "prior"))
+        down. The last solution's weights and rejections stay with the priors that remain."""
+        removed = _removal_mask(priors, len(self.priors), "prior")
+        self._carry_solution(priors=removed)
+        self.priors = self.priors.subset(~removed)
         self.structure_version += 1
 
     def remove_nodes(self, node_ids) -> tuple[np.ndarray, np.ndarray]:
@@ -663,12 +709,13 @@ class PoseGraph:
         A node that joined parts of the graph leaves them apart unless an edge re-links them
         (for a culled keyframe, the composition of the two edges through it, its information
         from ``lie.uncertainty.compose_covariance``). The next ``posegraph.optimize`` starts
-        from the values that remain; as after ``remove_edges``, it forgets the last robust
-        run's decisions once a measurement went or moved (``Solution.weights_for``)."""
+        from the values that remain, and a robust one from the last run's decisions on the
+        measurements that remain (``Solution.without``)."""
         removed = np.zeros(self.num_nodes, dtype=bool)
         removed[self.index(node_ids)] = True
         edges = removed[self.edges.i] | removed[self.edges.j]
         priors = removed[self.priors.i]
+        self._carry_solution(removed, edges, priors)
         remaining = self.subgraph(~removed)
         for name, stack in self._stacks.items():
             stack.set(getattr(remaining, name))
@@ -676,6 +723,30 @@ class PoseGraph:
         self.equivalences = remaining.equivalences
         self.structure_version += 1
         return edges, priors
+
+    def _carry_solution(
+        self,
+        nodes: np.ndarray | None = None,
+        edges: np.ndarray | None = None,
+        priors: np.ndarray | None = None,
+    ) -> None:
+        """Before a removal (masks over the nodes, edges and priors; None for none of them),
+        leave in ``solution`` what remains of it (``Solution.without``), if its measurements
+        still come first and unchanged; otherwise no later call carries it anyway."""
+        solution = self.solution
+        if solution is None or not (
+            self.edges.starts_with(solution.edges) and self.priors.starts_with(solution.priors)
+        ):
+            return
+
+        def own(removed: np.ndarray | None, count: int) -> np.ndarray:
+            return np.zeros(count, dtype=bool) if removed is None else removed[:count]
+
+        self.solution = solution.without(
+            own(nodes, len(solution.fixed)),
+            own(edges, len(solution.edges)),
+            own(priors, len(solution.priors)),
+        )
 
     def fix(self, node_ids, fixed: bool = True) -> None:
         """Hold nodes at their current values (or release them with ``fixed=False``)."""

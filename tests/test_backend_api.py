@@ -299,28 +299,30 @@ def test_after_culling_keyframes_a_warm_start_ends_where_a_fresh_solve_does():
     """Keyframes culled from an optimised map (their neighbours re-linked), and a pose added:
     the warm start ends at a fresh solve's optimum, by least squares and by GNC, and is not
     taken for the old solution extended (the culled nodes' loops changed the problem). GNC's
-    decisions are forgotten, as after ``remove_edges``, and it rejects again what a fresh GNC
-    rejects: the false loops that remain."""
+    rejections stay with the edges that remain, its search starts from its decisions there,
+    and it rejects what a fresh GNC rejects: the false loops that remain."""
     clean, _ = manhattan_world(200, seed=3)
     noisy, false = add_false_loops(clean, 0.1, seed=3)
     culled = [60, 94, 130]  # 94 ends a false loop
     ends = noisy.node_ids[noisy.edges.i], noisy.node_ids[noisy.edges.j]
     touching = np.isin(ends[0], culled) | np.isin(ends[1], culled)
+    # The edges that remain come first, in order, then the re-links and the new odometry.
+    remaining_false = np.flatnonzero(false[~touching])
     for graph, robust in ((clean, None), (noisy, "gnc")):
         posegraph.optimize(graph, robust=robust)
         for node in culled:
             cull(graph, node)
-        assert not graph.rejected()[0].any()
+        rejected = np.flatnonzero(graph.rejected()[0])
+        assert rejected.tolist() == (remaining_false.tolist() if robust else [])
         graph.add_node(500)
         graph.add_edge(199, 500, SE2.from_xytheta([1.0, 0.0, 0.0]), np.eye(3) * 100)
         warm = posegraph.optimize(graph.copy(), robust=robust).summary
         fresh = posegraph.optimize(graph.copy(), init="chordal", robust=robust).summary
         assert warm.initialization == "warm start" and warm.termination != COMPOSED
+        assert _searched_from_decisions(warm) == (robust is not None)
         assert warm.final_error == pytest.approx(fresh.final_error, rel=1e-6), robust
         assert warm.rejected_edges == fresh.rejected_edges
-    # The edges that remain come first, in order, then the re-links and the new odometry.
-    remaining_false = np.flatnonzero(false[~touching]).tolist()
-    assert (false & touching).any() and warm.rejected_edges == remaining_false
+    assert (false & touching).any() and warm.rejected_edges == remaining_false.tolist()
 
 
 @pytest.mark.parametrize("group", [SE2, SE3, Sim3])
@@ -685,7 +687,7 @@ def _searched_from_decisions(summary) -> bool:
         (lambda graph: graph.fix([151]), "gnc", "loops", "decisions"),
         (lambda graph: None, "gnc:3", "loops", "stages"),
         (lambda graph: None, "gnc", _one_true_loop_trusted, "stages"),
-        (_remove_first_loop, "gnc", "loops", "stages"),
+        (_remove_first_loop, "gnc", "loops", "decisions"),
         (_replace_first_prior, "gnc", "loops", "stages"),
         (_remeasure_first_loop, "gnc", "loops", "stages"),
     ],
@@ -705,10 +707,10 @@ def test_gnc_decides_again_when_what_was_added_could_change_its_decisions(
     change, robust, robust_edges, search
 ):
     """The decisions do not stand, and the call searches: from them alone where the graph only
-    grew under the same kernel and least squares over them settles as it is; from GNC's stages
-    where they are not carried; from the better of both where least squares over them does not
-    settle as it is (the new false loop, which they keep, misfits there). Either way the new
-    false loop ends rejected."""
+    grew (or lost an old loop: ``PoseGraph.remove_edges`` carries them) under the same kernel
+    and least squares over them settles as it is; from GNC's stages where they are not carried;
+    from the better of both where least squares over them does not settle as it is (the new
+    false loop, which they keep, misfits there). Either way the new false loop ends rejected."""
     graph, _ = _city_with_false_loops()
     graph.add_prior(0, SE2.identity(), np.eye(3))
     first = posegraph.optimize(graph, robust="gnc")
@@ -958,12 +960,54 @@ def test_marginals_after_gnc_leave_the_rejected_loops_out():
     )
 
 
+def test_gnc_with_fixes_searches_from_its_decisions_after_a_fix_and_a_keyframe_go():
+    """Under ``robust_priors`` the GNC problem holds the edges, then the priors: removing a
+    false fix and culling a keyframe with a fix keeps the decisions on what remains, and the
+    search from them rejects what GNC from scratch rejects."""
+    graph, false_fixes = city_with_fixes(0.3, seed=0)
+    corrupted, false_loops = add_false_loops(graph, 0.1, seed=0)
+    posegraph.optimize(corrupted, robust="gnc", robust_priors=True)
+    corrupted.remove_priors([np.flatnonzero(false_fixes)[0]])
+    fixed_nodes = corrupted.node_ids[corrupted.priors.i]
+    cull(corrupted, int(fixed_nodes[(fixed_nodes > 0) & (fixed_nodes < 299)][3]))
+    edges, priors = corrupted.rejected()
+    assert edges.sum() == false_loops.sum() and priors.sum() == false_fixes.sum() - 1
+    scratch = corrupted.copy()
+    scratch.solution = None
+    warm = posegraph.optimize(corrupted, robust="gnc", robust_priors=True).summary
+    fresh = posegraph.optimize(scratch, robust="gnc", robust_priors=True).summary
+    assert _searched_from_decisions(warm) and not _searched_from_decisions(fresh)
+    assert warm.rejected_edges == fresh.rejected_edges == np.flatnonzero(edges).tolist()
+    assert warm.rejected_priors == fresh.rejected_priors == np.flatnonzero(priors).tolist()
+    assert warm.final_error == pytest.approx(fresh.final_error, rel=1e-6)
+
+
+def test_marginals_after_culling_still_leave_the_rejected_loops_out():
+    """A keyframe culled after GNC: the weights stay with the edges that remain, so the
+    covariances are still those of the inliers, at the same values; with every loop counted
+    in full they would be smaller."""
+    graph, _ = manhattan_world(num_poses=150, seed=93)
+    corrupted, false = add_false_loops(graph, 0.1, seed=1)
+    posegraph.optimize(corrupted, robust="gnc")
+    cull(corrupted, 75)
+    nodes = corrupted.node_ids[[40, 74, 148]]
+    ours = posegraph.marginals(corrupted, nodes)
+    inliers = corrupted.without_rejected()
+    assert inliers.num_edges == corrupted.num_edges - np.count_nonzero(false) > 0
+    np.testing.assert_allclose(ours, posegraph.marginals(inliers, nodes), rtol=1e-9)
+    counted_in_full = corrupted.copy()
+    counted_in_full.solution = None
+    in_full = np.trace(posegraph.marginals(counted_in_full, nodes), axis1=1, axis2=2)
+    assert np.all(in_full < 0.95 * np.trace(ours, axis1=1, axis2=2))
+
+
 def test_without_rejected_keeps_what_a_robust_solve_kept():
     """After GNC, ``rejected`` marks exactly the false loops and the false fixes, and
     ``without_rejected`` holds the rest. GNC's last solve is least squares over its decisions,
     so least squares over the inliers stays at the robust solution, where the TLS cost is theirs
     plus ½c² for each rejected measurement (c = √χ²₃(0.999)). Measurements added since are not
-    rejected; a removed one makes its kind's rejections unknown (``Solution.weights_for``)."""
+    rejected; those that remain after a removal keep theirs (``Solution.without``), and a
+    measurement changed in place makes its kind's rejections unknown."""
     from scipy.stats import chi2 as chi2_distribution
 
     graph, false_fixes = city_with_fixes(0.3, seed=0)
@@ -992,9 +1036,15 @@ def test_without_rejected_keeps_what_a_robust_solve_kept():
     np.testing.assert_array_equal(edges, np.append(false_loops, False))
     np.testing.assert_array_equal(priors, false_fixes)
     corrupted.remove_edges([0])
+    corrupted.remove_priors([np.flatnonzero(false_fixes)[0]])
     edges, priors = corrupted.rejected()
-    assert not edges.any()
-    np.testing.assert_array_equal(priors, false_fixes)
+    np.testing.assert_array_equal(edges, np.append(false_loops, False)[1:])
+    np.testing.assert_array_equal(priors, np.delete(false_fixes, np.flatnonzero(false_fixes)[0]))
+    assert edges.any() and priors.any()
+    moved = corrupted.priors.measurements.retract(np.full((len(corrupted.priors), 3), 0.1))
+    corrupted.priors = dataclasses.replace(corrupted.priors, measurements=moved)
+    edges, priors = corrupted.rejected()
+    assert edges.any() and not priors.any()
     posegraph.optimize(graph)
     assert not any(mask.any() for mask in graph.rejected())  # least squares rejects nothing
 
