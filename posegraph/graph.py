@@ -220,7 +220,7 @@ class Solution:
         (over its own) hold were removed: the other measurements, renumbered, with their
         weights, rejections and GNC problem, and the values and holds of the other nodes. The
         values are no longer an optimum (``optimal``)."""
-        index = np.cumsum(~nodes) - 1
+        index = _renumbered(~nodes)
         summary = dataclasses.replace(
             self.summary,
             rejected_edges=_kept_indices(self.summary.rejected_edges, edges),
@@ -268,9 +268,16 @@ class Solution:
         return rejected[0], rejected[1]
 
 
+def _renumbered(kept: np.ndarray) -> np.ndarray:
+    """Per entry of a sequence, its index among the ``kept`` ones (a mask), or −1."""
+    index = np.full(kept.size, -1, dtype=np.int64)
+    index[kept] = np.arange(np.count_nonzero(kept))
+    return index
+
+
 def _kept_indices(indices: list[int], removed: np.ndarray) -> list[int]:
     """``indices`` into a sequence, renumbered for the sequence without the ``removed`` ones."""
-    renumbered = np.cumsum(~removed) - 1
+    renumbered = _renumbered(~removed)
     return [int(renumbered[k]) for k in indices if not removed[k]]
 
 
@@ -664,8 +671,7 @@ class PoseGraph:
         """The nodes where the mask ``nodes`` holds (in order, with their values, fixed flags
         and priors) and the between edges joining two of them (only those where the mask
         ``edges`` holds, if given)."""
-        index = np.full(self.num_nodes, -1, dtype=np.int64)
-        index[nodes] = np.arange(np.count_nonzero(nodes))
+        index = _renumbered(nodes)
         inside = (index[self.edges.i] >= 0) & (index[self.edges.j] >= 0)
         kept = self.edges.subset(inside if edges is None else inside & edges)
         priors = self.priors.subset(index[self.priors.i] >= 0)
