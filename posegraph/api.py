@@ -12,7 +12,7 @@ from scipy.sparse.csgraph import connected_components
 from .anchoring import priors_as_edges
 from .factors import between_squares, chi2, prior_squares
 from .gnc import gnc_tls, tls_objective
-from .graph import PoseGraph, Solution, information_ranks, measured_dof
+from .graph import PoseGraph, Solution, information_ranks, measured_dof, measurement_mask
 from .initialization import (
     align_to_priors,
     choose,
@@ -51,7 +51,8 @@ KERNEL_QUANTILE = 0.95
 def robust_mask(graph: PoseGraph, edges: str | np.ndarray) -> np.ndarray:
     """Which between edges a robust kernel applies to: "loops" (not between consecutive nodes),
     "all", or the caller's own class, as a boolean mask over the graph's between edges or as
-    their indices. The edges outside it are trusted (gtsam's GNC calls them known inliers)."""
+    their indices (negative ones count from the end). The edges outside it are trusted (gtsam's
+    GNC calls them known inliers)."""
     if isinstance(edges, str):
         if edges == "loops":
             return ~odometry_mask(graph)
@@ -61,31 +62,7 @@ def robust_mask(graph: PoseGraph, edges: str | np.ndarray) -> np.ndarray:
             f"robust edges are {' or '.join(ROBUST_EDGE_CLASSES)}, a boolean mask or edge "
             f"indices, not {edges!r}"
         )
-    chosen = np.asarray(edges)
-    count = graph.num_edges
-    if chosen.dtype == bool:
-        if chosen.shape != (count,):
-            raise ValueError(
-                f"a robust edge mask has one entry per between edge ({count}), "
-                f"not shape {chosen.shape}"
-            )
-        return chosen.copy()
-    if chosen.size == 0:
-        return np.zeros(count, dtype=bool)
-    if chosen.ndim != 1 or not np.issubdtype(chosen.dtype, np.integer):
-        raise ValueError(
-            "robust edges given as an array are a boolean mask over the between edges or a list "
-            f"of their indices, not an array of {chosen.dtype} with shape {chosen.shape}"
-        )
-    outside = chosen[(chosen < 0) | (chosen >= count)]
-    if outside.size:
-        raise ValueError(
-            f"robust edge index {outside[0]} is not one of the graph's between edges "
-            f"(0 to {count - 1})"
-        )
-    mask = np.zeros(count, dtype=bool)
-    mask[chosen] = True
-    return mask
+    return measurement_mask(edges, graph.num_edges, "edge", "robust edges")
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

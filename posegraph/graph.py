@@ -281,27 +281,30 @@ def _kept_indices(indices: list[int], removed: np.ndarray) -> list[int]:
     return [int(renumbered[k]) for k in indices if not removed[k]]
 
 
-def _removal_mask(given, count: int, noun: str) -> np.ndarray:
-    """A mask over ``count`` measurements (``noun``: "edge", "prior") from indices (negative
-    ones count from the end) or a boolean mask; ``ValueError`` saying what is wrong otherwise."""
+def measurement_mask(given, count: int, noun: str, what: str) -> np.ndarray:
+    """A new boolean mask over ``count`` measurements (``noun``: "edge" or "prior") from their
+    indices (negative ones count from the end, as in Python) or from a boolean mask with one
+    entry per measurement. Anything else is a ``ValueError`` that names ``what`` was chosen
+    ("edges to remove", "robust edges") and what is wrong."""
     given = np.asarray(given)
     if given.dtype == bool:
         if given.shape != (count,):
-            article = "an" if noun[0] in "aeiou" else "a"
             raise ValueError(
-                f"{article} {noun} mask has {count} entries, one per {noun}, not {given.shape}"
+                f"{what} given as a mask have one entry per {noun} ({count}), not shape "
+                f"{given.shape}"
             )
-        return given
+        return given.copy()
     indices = np.atleast_1d(given)
     if indices.ndim != 1 or (indices.size and indices.dtype.kind not in "iu"):
         raise ValueError(
-            f"{noun}s are removed by integer indices or a boolean mask, not by {given.dtype} of"
-            f" shape {given.shape}"
+            f"{what} are given by integer indices or a boolean mask, not by {given.dtype} of "
+            f"shape {given.shape}"
         )
     outside = (indices < -count) | (indices >= count)
     if outside.any():
         raise ValueError(
-            f"{noun} index {indices[outside][0]} is out of range: the graph has {count} {noun}s"
+            f"{noun} index {indices[outside][0]} is out of range ({what}): the graph has "
+            f"{count} {noun}s"
         )
     mask = np.zeros(count, dtype=bool)
     mask[indices.astype(np.int64)] = True
@@ -691,7 +694,7 @@ class PoseGraph:
         """Remove between edges given by index (negative ones count from the end) or where a
         boolean mask over the edges holds; indices of later edges shift down. The last
         solution's weights and rejections stay with the edges that remain (``Solution.without``)."""
-        removed = _removal_mask(edges, self.num_edges, "edge")
+        removed = measurement_mask(edges, self.num_edges, "edge", "edges to remove")
         self._carry_solution(edges=removed)
         self.edges = self.edges.subset(~removed)
         self.structure_version += 1
@@ -700,7 +703,7 @@ class PoseGraph:
         """Remove priors given by index (negative ones count from the end) or where a boolean
         mask over the priors holds (a GNSS fix found wrong); indices of later priors shift
         down. The last solution's weights and rejections stay with the priors that remain."""
-        removed = _removal_mask(priors, len(self.priors), "prior")
+        removed = measurement_mask(priors, len(self.priors), "prior", "priors to remove")
         self._carry_solution(priors=removed)
         self.priors = self.priors.subset(~removed)
         self.structure_version += 1

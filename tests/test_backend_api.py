@@ -225,8 +225,11 @@ def test_edges_are_removed_by_index_or_mask_and_counts_must_agree():
     graph.remove_edges(-1)
     assert graph.edges.i.tolist() == [1]
     for edges, message in [
-        ([1], "edge index 1 is out of range: the graph has 1 edges"),
-        ([True, False], r"an edge mask has 1 entries, one per edge, not \(2,\)"),
+        ([1], r"edge index 1 is out of range \(edges to remove\): the graph has 1 edges"),
+        (
+            [True, False],
+            r"edges to remove given as a mask have one entry per edge \(1\), not shape \(2,\)",
+        ),
         ([0.0], r"integer indices or a boolean mask, not by float64 of shape \(1,\)"),
     ]:
         with pytest.raises(ValueError, match=message):
@@ -250,9 +253,12 @@ def test_priors_are_removed_by_index_or_mask_and_counts_must_agree():
     graph.remove_priors(np.array([True, False, True]))
     assert graph.priors.i.tolist() == [before.i[2]]
     for priors, message in [
-        ([1], "prior index 1 is out of range: the graph has 1 priors"),
-        ([True, False], r"a prior mask has 1 entries, one per prior, not \(2,\)"),
-        (["0"], "priors are removed by integer indices or a boolean mask, not by <U1"),
+        ([1], r"prior index 1 is out of range \(priors to remove\): the graph has 1 priors"),
+        (
+            [True, False],
+            r"priors to remove given as a mask have one entry per prior \(1\), not shape \(2,\)",
+        ),
+        (["0"], "priors to remove are given by integer indices or a boolean mask, not by <U1"),
     ]:
         with pytest.raises(ValueError, match=message):
             graph.remove_priors(priors)

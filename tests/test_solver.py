@@ -9,6 +9,7 @@ import pytest
 from posegraph_datasets.outliers import add_false_loops
 
 import posegraph
+from posegraph.api import robust_mask
 from posegraph.factors import linearize_between, linearize_priors
 from posegraph.io import read_graph
 from posegraph.lie import SE2, SE3
@@ -291,15 +292,19 @@ def test_robust_options_are_checked_before_any_work():
         ({"robust": "cauchy", "robust_edges": "some"}, "robust edges are loops or all"),
         (
             {"robust": "gnc", "robust_edges": np.ones(graph.num_edges - 1, dtype=bool)},
-            rf"one entry per between edge \({graph.num_edges}\), not shape \({graph.num_edges - 1},\)",
+            rf"robust edges given as a mask have one entry per edge \({graph.num_edges}\), "
+            rf"not shape \({graph.num_edges - 1},\)",
         ),
         (
             {"robust": "gnc", "robust_edges": [0, graph.num_edges]},
-            rf"index {graph.num_edges} is not one of the graph's between edges "
-            rf"\(0 to {graph.num_edges - 1}\)",
+            rf"edge index {graph.num_edges} is out of range \(robust edges\): the graph has "
+            rf"{graph.num_edges} edges",
         ),
-        ({"robust": "gnc", "robust_edges": [-1]}, "index -1 is not one of"),
-        ({"robust": "gnc", "robust_edges": [0.0, 1.0]}, "not an array of float64"),
+        (
+            {"robust": "gnc", "robust_edges": [-graph.num_edges - 1]},
+            rf"edge index {-graph.num_edges - 1} is out of range",
+        ),
+        ({"robust": "gnc", "robust_edges": [0.0, 1.0]}, "not by float64 of shape"),
     ]
     for keywords, message in cases:
         with pytest.raises(ValueError, match=message):
@@ -307,6 +312,8 @@ def test_robust_options_are_checked_before_any_work():
         assert graph.values is values  # untouched
     result = posegraph.optimize(graph, robust="Cauchy:2", robust_edges="all")
     assert result.summary.robust == "cauchy:2"
+    last_two = robust_mask(graph, [-2, -1])  # negative indices count from the end, as in Python
+    assert np.flatnonzero(last_two).tolist() == [graph.num_edges - 2, graph.num_edges - 1]
 
 
 @pytest.mark.parametrize("group", [SE2, SE3])
