@@ -106,6 +106,7 @@ MALFORMED = [
     ("only-comments", "# nothing here\n\n   \n", None, "holds no vertices or edges"),
     ("missing-file", None, None, "no such file"),
     ("unknown-tag", V0 + "VERTEX_XYZ 1 0 0 0\n", 2, "unknown tag 'VERTEX_XYZ'"),
+    ("landmark-tag", V0 + "VERTEX_XY 1 2 3\n", 2, "landmark tag 'VERTEX_XY': posegraph optimises"),
     ("fractional-id", "VERTEX_SE2 1.5 0 0 0\n", 1, "node ids must be whole numbers"),
     ("negative-id", "VERTEX_SE2 -3 0 0 0\n", 1, "node ids must be whole numbers"),
     ("id-beyond-int64", "VERTEX_SE2 9223372036854775808 0 0 0\n", 1, "from 0 to 2⁶³ − 1"),

@@ -474,7 +474,7 @@ def test_every_command_reports_the_lines_that_lenient_reading_skipped(tmp_path):
     expected = [
         {
             "path": str(broken),
-            "reason": "unknown tag 'LANDMARK2'",
+            "reason": "landmark tag 'LANDMARK2': posegraph optimises poses only",
             "count": 3,
             "first_line": landmark_line,
         },
@@ -486,8 +486,9 @@ def test_every_command_reports_the_lines_that_lenient_reading_skipped(tmp_path):
         },
     ]
     warning = (
-        f"posegraph: warning: {broken}: 4 line(s) skipped: 3 × unknown tag 'LANDMARK2' (first at "
-        f"line {landmark_line}); 1 × EDGE_SE2: edge from node 5 to itself (first at line "
+        f"posegraph: warning: {broken}: 4 line(s) skipped: 3 × landmark tag 'LANDMARK2': posegraph"
+        f" optimises poses only (first at line {landmark_line}); 1 × EDGE_SE2: edge from node 5 to"
+        " itself (first at line "
         f"{self_loop_line}); the results leave out what those lines say\n"
     )
     output = tmp_path / "out.g2o"

@@ -486,6 +486,26 @@ def test_lenient_mode_skips_and_reports(tmp_path):
     )
 
 
+def test_landmark_lines_are_named_and_lenient_reading_leaves_them_out(tmp_path):
+    path = tmp_path / "landmarks.g2o"
+    path.write_text(
+        "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nVERTEX_XY 2 1 1\n"
+        "EDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\nEDGE_SE2_XY 0 2 1 1 1 0 1\n"
+    )
+    with pytest.raises(GraphFileError) as raised:
+        read_graph(str(path))
+    assert str(raised.value) == (
+        f"{path}:3: landmark tag 'VERTEX_XY': posegraph optimises poses only (--lenient"
+        " leaves the landmarks out) (the first of 2 bad lines found)"
+    )
+    result = read_graph(str(path), ReadOptions(lenient=True))
+    assert result.skipped == [
+        (3, "landmark tag 'VERTEX_XY': posegraph optimises poses only"),
+        (5, "landmark tag 'EDGE_SE2_XY': posegraph optimises poses only"),
+    ]
+    assert (result.graph.num_nodes, result.graph.num_edges) == (2, 1)
+
+
 def _refused_leniently(path, text: str) -> str:
     """The error of reading ``text``, written to ``path``, leniently."""
     path.write_text(text)

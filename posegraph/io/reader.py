@@ -29,6 +29,7 @@ from .parsing import (
 from .tags import (
     EDGE2_ORDERS,
     G2O_TAGS,
+    LANDMARK_TAGS,
     TORO_TAGS,
     TagFormat,
     edge2_information,
@@ -378,7 +379,7 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
     lines_by_tag: dict[str, list] = {}
     for number, tag, text in read_tagged_lines(path):
         if tag not in ALL_TAGS:
-            checker.fail(number, f"unknown tag {tag!r}{_unknown_tag_advice(tag, options)}")
+            checker.fail(number, _unknown_tag_reason(tag, options))
             continue
         lines_by_tag.setdefault(tag, []).append((number, text))
     checker.raise_first()
@@ -461,14 +462,22 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
     return read
 
 
-def _unknown_tag_advice(tag: str, options: ReadOptions) -> str:
-    """What to add to "unknown tag": a line that starts with a number is a trajectory's (TUM or
-    KITTI), not a graph's; otherwise, in strict mode, that --lenient skips such lines."""
+def _unknown_tag_reason(tag: str, options: ReadOptions) -> str:
+    """Why a line of an unknown tag is refused: a landmark tag is named as one; a line
+    that starts with a number is a trajectory's (TUM or KITTI), not a graph's; otherwise, in
+    strict mode, --lenient skips such lines."""
+    if tag in LANDMARK_TAGS:
+        advice = "" if options.lenient else " (--lenient leaves the landmarks out)"
+        return f"landmark tag {tag!r}: posegraph optimises poses only{advice}"
     try:
         float(tag)
     except ValueError:
-        return "" if options.lenient else " (--lenient skips lines it cannot read)"
-    return ": a line of numbers, as in a TUM or KITTI trajectory, not a g2o or TORO graph"
+        advice = "" if options.lenient else " (--lenient skips lines it cannot read)"
+        return f"unknown tag {tag!r}{advice}"
+    return (
+        f"unknown tag {tag!r}: a line of numbers, as in a TUM or KITTI trajectory, not a g2o or"
+        " TORO graph"
+    )
 
 
 def _skipped_vertex_lines(lines_by_tag: dict[str, list], checker: LineChecker) -> dict[int, int]:

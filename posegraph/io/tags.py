@@ -264,3 +264,29 @@ TORO_TAGS: dict[str, TagFormat] = {
     "EQUIV": TagFormat("equiv", None, (2,), (0, 1)),
 }
 """TORO tags (2D and 3D)."""
+
+LANDMARK_TAGS = frozenset(
+    {
+        "VERTEX_XY",
+        "VERTEX_TRACKXYZ",
+        "EDGE_SE2_XY",
+        "EDGE_BEARING_SE2_XY",
+        "EDGE_SE2_XY_CALIB",
+        "EDGE_SE2_POINTXY_OFFSET",
+        "EDGE_SE2_TWOPOINTSXY",
+        "EDGE_SE2_LOTSOFXY",
+        "EDGE_POINTXY",
+        "EDGE_PRIOR_XY",
+        "EDGE_SE3_TRACKXYZ",
+        "EDGE_SE3_LOTSOF_XYZ",
+        "EDGE_POINTXYZ",
+        "EDGE_POINTXYZ_PRIOR",
+        "EDGE_PROJECT_DEPTH",
+        "EDGE_PROJECT_DISPARITY",
+        "LANDMARK2",
+        "BR",
+    }
+)
+"""Tags of landmark (point) vertices and of measurements of points: g2o's (types_slam2d and
+types_slam3d), and LANDMARK2 and the bearing-range BR of gtsam's example files. Not read, as
+posegraph optimises poses only."""
