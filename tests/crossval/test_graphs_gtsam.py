@@ -15,7 +15,7 @@ from posegraph.lie import SE2, SE3, Sim3
 from posegraph.linear import NormalEquations
 from posegraph.solvers import SolverOptions, optimize
 
-from ..conftest import cull, random_graph
+from ..conftest import cull, gnss_track, random_graph
 
 gtsam = pytest.importorskip("gtsam")
 bridge = pytest.importorskip("posegraph.validation.gtsam_bridge")
@@ -229,3 +229,33 @@ def test_a_stream_into_gtsam_ends_where_posegraph_warm_starts_end(world):
     assert theirs["lm"][1] == pytest.approx(ours, rel=1e-6)
     assert theirs["isam2"][1] >= ours * (1 - 1e-9)
     assert all(seconds > 0 for seconds, _ in theirs.values())
+
+
+def test_gnss_fixes_given_the_poses_rotations_reach_gtsams_position_only_optimum():
+    """A GNSS fix is a prior without rotation information, r = Log(Z⁻¹X): its position part
+    V(φ)⁻¹ R_Zᵀ (t − t_Z) depends on how far the pose turns from Z's rotation. On a track
+    heading 3 rad from the fixes' identity rotation, the optimum is far from gtsam's with
+    GPSFactor (r = t − t_Z, as the README says); given the solution's rotations, the fixes
+    reach it."""
+    track, _ = gnss_track(SE3, heading=3.0, seed=1)
+    fixes = track.priors
+    without_fixes = track.copy()
+    without_fixes.remove_priors(np.arange(len(fixes)))
+    factors, _ = bridge.graph_to_gtsam(without_fixes, hold_gauge=False)
+    noise = gtsam.noiseModel.Isotropic.Sigma(3, 1.0)  # the fixes' σ (conftest.gnss_track)
+    for node, position in zip(track.node_ids[fixes.i], fixes.measurements.translation, strict=True):
+        factors.add(gtsam.GPSFactor(int(node), gtsam.Point3(*position), noise))
+
+    def distance_to_gtsams_optimum(graph) -> float:
+        posegraph.optimize(graph)
+        start = bridge.values_to_gtsam(graph, np.arange(graph.num_nodes), graph.values)
+        optimum = gtsam.LevenbergMarquardtOptimizer(factors, start).optimize()
+        theirs = bridge.values_from_gtsam(graph, optimum).translation
+        return float(np.abs(graph.values.translation - theirs).max())
+
+    assert distance_to_gtsams_optimum(track) > 0.5
+    turned = np.tile(np.eye(4), (len(fixes), 1, 1))
+    turned[:, :3, :3] = track.values.rotation[fixes.i]
+    turned[:, :3, 3] = fixes.measurements.translation
+    without_fixes.add_priors(track.node_ids[fixes.i], turned, fixes.information)
+    assert distance_to_gtsams_optimum(without_fixes) < 0.01
