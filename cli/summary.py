@@ -5,13 +5,13 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
-from posegraph.doctor import Diagnosis
-from posegraph.evaluation import Evaluation
+from posegraph.analysis.doctor import Diagnosis
 from posegraph.graph import PoseGraph
 from posegraph.solvers import MAX_ITERATIONS, Summary
+from posegraph.trajectory.evaluation import Evaluation
 
 if TYPE_CHECKING:
-    from posegraph.scale_drift import ScaleDriftCorrection
+    from posegraph.sim3.scale_drift import ScaleDriftCorrection
 
 
 def format_summary(

@@ -18,10 +18,10 @@ import dataclasses
 
 import numpy as np
 
-from posegraph.factors import information_root
 from posegraph.graph import PoseGraph
 from posegraph.lie import SE2, SE3, LieGroup
 from posegraph.lie.so3 import exp_matrix
+from posegraph.problem.factors import information_root
 
 
 def noisy_measurements(
@@ -72,7 +72,6 @@ def resimulate(graph: PoseGraph, truth: LieGroup, seed: int) -> PoseGraph:
     simulated = graph.copy()
     simulated.edges = dataclasses.replace(edges, measurements=measurements)
     simulated.set_values(truth)
-    simulated.solution = None
     return simulated
 
 

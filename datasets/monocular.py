@@ -22,14 +22,14 @@ import dataclasses
 
 import numpy as np
 
-from posegraph.evaluation import evaluate
 from posegraph.graph import PoseGraph
 from posegraph.io.atomic import atomic_write_text
+from posegraph.io.trajectories import Trajectory, write_trajectory
 from posegraph.io.writer import format_g2o, sim3_edge_lines
 from posegraph.lie import SE3, Sim3
 from posegraph.lie.so3 import exp_matrix
-from posegraph.scale_drift import add_sim3_loops
-from posegraph.trajectory_io import Trajectory, write_trajectory
+from posegraph.sim3.scale_drift import add_sim3_loops
+from posegraph.trajectory.evaluation import evaluate
 
 from .outliers import add_false_loops
 
@@ -186,3 +186,22 @@ def write_sequence(
     )
     atomic_write_text(graph_path, format_g2o(sequence.odometry) + "\n".join(loops) + "\n")
     write_trajectory(Trajectory.of_graph(sequence.odometry, sequence.truth), truth_path, "tum")
+
+
+def main(arguments: list[str] | None = None) -> None:
+    """``python -m posegraph_datasets.monocular GRAPH TRUTH [--drift D] [--seed S]``: write a
+    sequence's g2o file and its ground truth (TUM), as ``posegraph scale-drift`` reads them."""
+    import argparse
+
+    parser = argparse.ArgumentParser(description=main.__doc__.splitlines()[0])
+    parser.add_argument("graph", help="the g2o file to write (SE3 odometry, Sim3 loops)")
+    parser.add_argument("truth", help="the ground truth to write (TUM)")
+    parser.add_argument("--drift", type=float, default=0.01, help="scale change per keyframe")
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args(arguments)
+    write_sequence(monocular_sequence(drift=args.drift, seed=args.seed), args.graph, args.truth)
+    print(f"wrote {args.graph} and {args.truth}")
+
+
+if __name__ == "__main__":
+    main()

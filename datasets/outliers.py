@@ -16,10 +16,9 @@ import dataclasses
 
 import numpy as np
 
-from posegraph.factors import information_root
-from posegraph.graph import PoseGraph
-from posegraph.initialization import odometry_mask
+from posegraph.graph import PoseGraph, odometry_mask
 from posegraph.lie import LieGroup
+from posegraph.problem.factors import information_root
 
 
 def add_false_loops(graph: PoseGraph, fraction: float, seed: int) -> tuple[PoseGraph, np.ndarray]:
@@ -45,11 +44,10 @@ def add_false_loops(graph: PoseGraph, fraction: float, seed: int) -> tuple[PoseG
 
 
 def without_priors(graph: PoseGraph, false: np.ndarray) -> PoseGraph:
-    """A copy of ``graph`` without the priors where ``false`` holds, and without its solution
-    (the reference that robust estimation is measured against)."""
+    """A copy of ``graph`` without the priors where ``false`` holds (the reference that robust
+    estimation is measured against)."""
     clean = graph.copy()
     clean.priors = clean.priors.subset(~false)
-    clean.solution = None
     return clean
 
 

@@ -2,12 +2,14 @@
 
 from importlib.metadata import PackageNotFoundError, version
 
+from .analysis.marginals import marginals, relative_covariances
 from .api import optimize
 from .graph import PoseGraph
 from .io import GraphFileError, ReadOptions, read_graph, write_graph
 from .lie import SE2, SE3, SO2, SO3, Sim3
-from .marginals import marginals, relative_covariances
-from .scale_drift import correct_scale_drift
+from .robust.spec import RobustSpec
+from .sim3.scale_drift import correct_scale_drift
+from .smoother import Smoother
 from .solvers import Result, SolverOptions
 
 try:
@@ -24,7 +26,9 @@ __all__ = [
     "PoseGraph",
     "ReadOptions",
     "Result",
+    "RobustSpec",
     "Sim3",
+    "Smoother",
     "SolverOptions",
     "correct_scale_drift",
     "marginals",

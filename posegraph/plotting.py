@@ -3,8 +3,8 @@
 Odometry (edges between consecutive nodes) is drawn as the trajectory line; loop closures as
 thin lines of a lighter shade; priors (GNSS fixes, say) as crosses at their measured positions.
 Several inputs are overlaid, one colour each (before/after); priors shared with an earlier input
-are drawn once. In a graph that a robust ``optimize`` left, the measurements it rejected
-(``PoseGraph.rejected``) are drawn apart: edges dashed in red, priors circled in red.
+are drawn once. In a smoother's graph, the measurements its last robust solve rejected
+(``Smoother.rejected``) are drawn apart: edges dashed in red, priors circled in red.
 SE2 graphs are drawn top-down; SE3 and Sim3 in 3D (or top-down with ``view="top"``).
 """
 
@@ -22,11 +22,14 @@ from matplotlib.backend_bases import FigureCanvasBase  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
 from mpl_toolkits.mplot3d.art3d import Line3DCollection  # noqa: E402
 
-from .graph import PoseGraph  # noqa: E402
-from .initialization import odometry_mask  # noqa: E402
+from .graph import (
+    PoseGraph,  # noqa: E402
+    odometry_mask,  # noqa: E402
+)
 from .io.atomic import atomic_path  # noqa: E402
+from .io.trajectories import as_se3  # noqa: E402
 from .lie import SE2  # noqa: E402
-from .trajectory_io import as_se3  # noqa: E402
+from .smoother import Smoother  # noqa: E402
 
 COLORS = ["tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown", "tab:olive"]
 REJECTED_COLOR = "tab:red"
@@ -122,17 +125,33 @@ def save_figure(figure, path: str) -> None:
         plt.close(figure)
 
 
+def _graph(drawn: PoseGraph | Smoother) -> PoseGraph:
+    return drawn.graph if isinstance(drawn, Smoother) else drawn
+
+
+def _rejected(drawn: PoseGraph | Smoother) -> tuple[np.ndarray, np.ndarray]:
+    """Masks over the edges and priors of what a smoother's last robust solve rejected (none
+    for a graph alone)."""
+    if isinstance(drawn, Smoother):
+        return drawn.rejected()
+    return np.zeros(drawn.num_edges, dtype=bool), np.zeros(len(drawn.priors), dtype=bool)
+
+
 def plot_graphs(
-    graphs: list[tuple[str, PoseGraph]], path: str, title: str | None = None, view: str = "auto"
+    graphs: list[tuple[str, PoseGraph | Smoother]],
+    path: str,
+    title: str | None = None,
+    view: str = "auto",
 ) -> None:
-    """Overlay pose graphs (label, graph) in one figure written to ``path``."""
-    three_d = view == "3d" or (view == "auto" and any(g.group is not SE2 for _, g in graphs))
+    """Overlay pose graphs (label, graph or smoother) in one figure written to ``path``; a
+    smoother's graph is drawn with what its last robust solve rejected dashed and circled."""
+    drawn = [(label, _graph(item), _rejected(item)) for label, item in graphs]
+    three_d = view == "3d" or (view == "auto" and any(g.group is not SE2 for _, g, _ in drawn))
     figure, axes = _new_axes(three_d)
     drawn_priors: list[np.ndarray] = []
-    for k, (label, graph) in enumerate(graphs):
+    for k, (label, graph, (rejected_edges, rejected_priors)) in enumerate(drawn):
         color = COLORS[k % len(COLORS)]
         positions = as_se3(graph.values).translation
-        rejected_edges, rejected_priors = graph.rejected()
         loop = ~odometry_mask(graph)
         kept = loop & ~rejected_edges
         loops = _segments(positions, graph.edges.i[kept], graph.edges.j[kept])

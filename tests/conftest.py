@@ -84,9 +84,11 @@ def union(first: PoseGraph, second: PoseGraph, id_offset: int) -> PoseGraph:
     return graph
 
 
-def cull(graph: PoseGraph, node_id: int) -> None:
-    """Remove a keyframe of a chain of ids, re-linking its neighbours by the composition of
-    the edges (k − 1 → k, k → k + 1) through it, its covariance by Eade §8.2."""
+def cull(smoother: posegraph.Smoother, node_id: int) -> None:
+    """Remove a keyframe of a chain of ids from a smoother's graph, re-linking its neighbours by
+    the composition of the edges (k − 1 → k, k → k + 1) through it, its covariance by Eade
+    §8.2."""
+    graph = smoother.graph
     ids, edges = graph.node_ids, graph.edges
     starts, ends = ids[edges.i], ids[edges.j]
     into = np.flatnonzero((starts == node_id - 1) & (ends == node_id))[0]
@@ -99,7 +101,7 @@ def cull(graph: PoseGraph, node_id: int) -> None:
         np.linalg.inv(edges.information[out]),
     )
     graph.add_edge(node_id - 1, node_id + 1, z_into @ z_out, np.linalg.inv(covariance))
-    graph.remove_nodes([node_id])
+    smoother.remove_nodes([node_id])
 
 
 SCALE_STEP = Sim3.exp(np.array([0, 0, 0, 0, 0, 0, 200.0]))

@@ -4,7 +4,7 @@ Usage: ``python -m posegraph.benchmarks.incremental [--step 100] [--graph w10000
 [--robust gnc --false-loops 0.1 --seed 0] [--gtsam]``.
 The graph (by default gtsam's Data/w10000.graph) arrives ``step`` poses at a time: the new
 poses come without values, with every edge whose two ends have arrived, and
-``posegraph.optimize`` runs after each step (warm start). The reference optimises each prefix as
+a ``Smoother`` optimises after each step (warm start). The reference optimises each prefix as
 a new graph (its default initialisation). Times count the ``optimize`` calls only. With
 ``--robust``, every call is robust, and ``--false-loops`` first adds that share of seeded false
 loop closures (``posegraph_datasets.outliers``); the last calls' rejection rates are reported.
@@ -25,11 +25,13 @@ import numpy as np
 from posegraph_datasets.outliers import add_false_loops, rejection_rates
 from posegraph_datasets.paths import gtsam_data_dir
 
-from ..api import COMPOSED, DECISIONS_AS_START, RESTART, optimize
+from ..api import optimize
 from ..graph import PoseGraph
-from ..initialization import spanning_tree_values
+from ..init.spanning_tree import spanning_tree_values
 from ..io import read_graph
 from ..lie import LieGroup
+from ..robust.run import DECISIONS_AS_START
+from ..smoother import COMPOSED, RESTART, Smoother
 from ..solvers import Summary
 from .timing import at_least
 
@@ -140,18 +142,7 @@ def run(
     false = np.zeros(full.num_edges, dtype=bool)
     if false_loops:
         full, false = add_false_loops(full, false_loops, seed)
-    warm_total, scratch_total, rows = 0.0, 0.0, []
-    for graph in stream(full, step):
-        start = time.perf_counter()
-        warm = optimize(graph, robust=robust)
-        warm_total += time.perf_counter() - start
-        prefix = graph.copy()
-        prefix.solution = None
-        prefix.set_values(prefix.values)
-        start = time.perf_counter()
-        scratch = optimize(prefix, robust=robust)
-        scratch_total += time.perf_counter() - start
-        rows.append((graph.num_nodes, warm.summary, scratch.summary))
+    rows, warm_total, scratch_total, graph = _streamed(full, step, robust)
     last_warm, last_scratch = rows[-1][1], rows[-1][2]
     difference = (last_warm.final_error - last_scratch.final_error) / last_scratch.final_error
     iterations = np.mean([w.num_iterations for _, w, _ in rows])
@@ -195,6 +186,23 @@ def run(
             f" {_rates(graph, streamed_false, last_scratch)} (scratch)"
         )
     return "\n".join(lines)
+
+
+def _streamed(full: PoseGraph, step: int, robust: str | None):
+    """The stream into one ``Smoother`` and, beside it, each prefix optimised from scratch: the
+    (nodes, warm summary, scratch summary) of every step, the two total times, and the graph."""
+    warm_total, scratch_total, rows, smoother = 0.0, 0.0, [], None
+    for graph in stream(full, step):
+        smoother = smoother or Smoother(graph)
+        start = time.perf_counter()
+        warm = smoother.optimize(robust=robust)
+        warm_total += time.perf_counter() - start
+        prefix = graph.copy()
+        start = time.perf_counter()
+        scratch = optimize(prefix, robust=robust)
+        scratch_total += time.perf_counter() - start
+        rows.append((graph.num_nodes, warm.summary, scratch.summary))
+    return rows, warm_total, scratch_total, graph
 
 
 def _rates(graph: PoseGraph, false: np.ndarray, summary: Summary) -> str:

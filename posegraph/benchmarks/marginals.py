@@ -3,7 +3,7 @@
 Usage: ``python -m posegraph.benchmarks.marginals [--nodes 1 100 1000 0] [--pairs 10 100]
 [--random-pairs 100] [--graph G]``. The graph (by default the shared sphere2500.g2o, else
 gtsam's Data/sphere2500.txt) is optimised once; then, for each count of ``--nodes`` (0: every
-pose but the gauge), ``posegraph.marginals`` for that many random poses, and gtsam's
+pose but the gauge), ``posegraph.analysis.marginals`` for that many random poses, and gtsam's
 ``Marginals`` (its construction, which factorises, plus one ``marginalCovariance`` per pose) at
 the same values. For each count of ``--pairs`` (a loop-closure search: the newest pose against
 that many others) and of ``--random-pairs``, ``posegraph.relative_covariances`` of the pairs,
@@ -20,10 +20,10 @@ from pathlib import Path
 import numpy as np
 from posegraph_datasets.paths import gtsam_data_dir, shared_datasets_dir
 
+from ..analysis.marginals import marginals, relative_covariances
 from ..api import optimize
 from ..graph import PoseGraph
 from ..io import read_graph
-from ..marginals import marginals, relative_covariances
 from .timing import at_least, best_time
 
 

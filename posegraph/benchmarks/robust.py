@@ -37,13 +37,14 @@ from posegraph_datasets.outliers import (
 )
 from posegraph_datasets.paths import gtsam_data_dir, shared_datasets_dir
 
-from ..api import GNC_QUANTILE, optimize, robust_mask
-from ..evaluation import evaluate
+from ..api import optimize
 from ..graph import PoseGraph
-from ..initialization import initialize
+from ..init.choice import initialize
 from ..io import read_graph
+from ..io.trajectories import Trajectory
 from ..lie import LieGroup
-from ..trajectory_io import Trajectory
+from ..robust.spec import GNC_QUANTILE, robust_mask
+from ..trajectory.evaluation import evaluate
 from .table import MarkdownTable
 
 

@@ -26,7 +26,7 @@ from posegraph_datasets.outliers import rejection_rates
 
 from ..api import optimize
 from ..graph import PoseGraph
-from ..scale_drift import correct_scale_drift
+from ..sim3.scale_drift import correct_scale_drift
 from .optimizer import time_gtsam
 from .table import MarkdownTable
 from .timing import BUDGET, best_run, taking_turns

@@ -1,7 +1,8 @@
 """Reading and writing pose-graph files (g2o and TORO)."""
 
 from .errors import GraphFileError
-from .reader import ReadOptions, ReadResult, read_graph
+from .options import ReadOptions
+from .reader import ReadResult, read_graph
 from .writer import format_g2o, format_toro, unwritable, write_graph
 
 __all__ = [

@@ -1,6 +1,6 @@
 """Nonlinear least-squares solvers: Gauss-Newton, Levenberg-Marquardt and Powell's dogleg."""
 
-from .optimize import MAX_ITERATIONS, STOPPED, TIME_LIMIT, Callback, optimize
+from .loop import MAX_ITERATIONS, STOPPED, TIME_LIMIT, Callback, solve
 from .options import SolverOptions
 from .summary import PHASES, IterationRecord, Result, Summary
 
@@ -14,5 +14,5 @@ __all__ = [
     "Result",
     "SolverOptions",
     "Summary",
-    "optimize",
+    "solve",
 ]

@@ -5,13 +5,10 @@ from __future__ import annotations
 import dataclasses
 
 DEFAULT_INITIAL_DAMPING = 1e-12
-"""Levenberg-Marquardt's λ at the start (relative: diagonal damping scales diag(H)). A monocular
-Sim3 correction with weak scale information (100, 2% drift per keyframe, 300 keyframes) has a
-scale-drift direction so soft that λ near 1e-11 shortens its steps, and Nielsen's update then
-keeps λ there (gain ratios near 0.6): from 1e-10, 69–81 iterations; from 1e-12, 7–8, at a lower
-error (Gauss-Newton: 6). ORB-SLAM's Sim3 essential graph starts g2o's λ at 1e-16. With the
-defaults, the benchmark graphs take the same iterations from either but MIT (23 against 22);
-from the files' values, MIT takes 24 against 21, w10000 9 against 7, manhattan 4 against 5."""
+"""Levenberg-Marquardt's λ at the start (relative: diagonal damping scales diag(H)). Small,
+because the scale drift of a monocular Sim3 graph is a direction so soft that a larger λ holds
+its steps short (ORB-SLAM's Sim3 essential graph starts g2o's λ at 1e-16); docs/architecture.md
+gives the measurements behind the value."""
 
 
 METHODS = ("lm", "gn", "dogleg")
@@ -37,11 +34,11 @@ class SolverOptions:
             of the stacked node tangents (Log of each value) at the start.
         damping: "diagonal" damps with λ·diag(H) (Marquardt, scale-invariant; after a rejected
             step, a node's directions that nothing measures with λ·max diag(H): see
-            ``posegraph.solvers.optimize``); "identity" with λ·I.
+            ``posegraph.solvers.loop``); "identity" with λ·I.
         initial_damping: λ at the start, relative to max diag(H) for "identity" damping. None:
             ``DEFAULT_INITIAL_DAMPING``, and in GNC's solves ``gnc.INITIAL_DAMPING``.
         min_diagonal, max_diagonal: clamp diag(H) before using it as damping (as Ceres does).
-        linear_solver: "auto", "cholmod" or "scipy" (see ``posegraph.sparse_cholesky``).
+        linear_solver: "auto", "cholmod" or "scipy" (see ``posegraph.problem.cholesky``).
     """
 
     method: str = "lm"

@@ -3,8 +3,13 @@
 from __future__ import annotations
 
 import dataclasses
+from typing import TYPE_CHECKING
 
 from ..lie import LieGroup
+
+if TYPE_CHECKING:
+    from ..problem.linear import NormalEquations
+    from ..problem.linearization import Linearized
 
 PHASES = ("linearize", "assemble", "factorize", "solve", "other")
 """The phases that ``Summary.phase_times`` times."""
@@ -26,9 +31,10 @@ class IterationRecord:
     """The part of a robust run the iteration belongs to ("gnc round 3 (warm)"), else ""."""
 
 
-@dataclasses.dataclass
+@dataclasses.dataclass(frozen=True)
 class Summary:
-    """How an optimisation went. ``error`` is ½ Σ rᵀΩr (gtsam's); ``chi2`` is Σ rᵀΩr (g2o's)."""
+    """How an optimisation went. ``error`` is ½ Σ rᵀΩr (gtsam's); ``chi2`` is Σ rᵀΩr (g2o's).
+    Frozen: a layer that adds to it builds a new one (``dataclasses.replace``)."""
 
     method: str
     linear_solver: str
@@ -42,10 +48,10 @@ class Summary:
     total_time: float
     num_variables: int
     """Size of the linear system (free nodes × dof)."""
-    reused: list[str] = dataclasses.field(default_factory=list)
+    reused: tuple[str, ...] = ()
     """What a warm start reused (for example "sparsity pattern", "symbolic factorization")."""
     initialization: str = "file"
-    """How the starting values were made (``posegraph.initialization.INITIALIZERS``)."""
+    """How the starting values were made (``posegraph.init.choice.INITIALIZERS``)."""
     initialization_time: float = 0.0
     input_error: float | None = None
     """½ Σ rᵀΩr at the values given, before the initialisation replaced them (None when some
@@ -107,9 +113,9 @@ class Result:
 
     values: LieGroup
     summary: Summary
-    system: object = dataclasses.field(default=None, repr=False, compare=False)
+    system: NormalEquations | None = dataclasses.field(default=None, repr=False, compare=False)
     """The ``NormalEquations`` used (pattern and symbolic factorisation), for reuse."""
-    linearization: object = dataclasses.field(default=None, repr=False, compare=False)
+    linearization: Linearized | None = dataclasses.field(default=None, repr=False, compare=False)
     """The residuals and Jacobians at ``values``, for reuse by a warm start."""
 
     def __getstate__(self) -> dict:

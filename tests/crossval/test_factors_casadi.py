@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from posegraph.factors import linearize_between
 from posegraph.graph import PoseGraph
 from posegraph.io import read_graph
 from posegraph.lie import SE2
-from posegraph.solvers import optimize
+from posegraph.problem.factors import linearize_between
+from posegraph.solvers import solve
 
 from ..conftest import POSE_GROUPS, random_graph
 
@@ -61,11 +61,11 @@ def _se2_loop(num_nodes: int = 20, seed: int = 12) -> PoseGraph:
 
 def test_se2_loop_optimum_equals_ipopt():
     graph = _se2_loop()
-    ours = optimize(graph).summary.final_error
+    ours = solve(graph).summary.final_error
     assert abs(ours - _ipopt_optimum(graph)) <= 1e-6 * ours
 
 
 def test_tiny_grid_optimum_equals_ipopt(shared_dataset):
     graph = read_graph(shared_dataset("tinyGrid3D.g2o")).graph
-    ours = optimize(graph).summary.final_error
+    ours = solve(graph).summary.final_error
     assert abs(ours - _ipopt_optimum(graph)) <= 1e-6 * ours

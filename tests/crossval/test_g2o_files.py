@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 import posegraph
-from posegraph.factors import chi2
 from posegraph.io import ReadOptions
 from posegraph.lie import SE3
+from posegraph.problem.factors import chi2
 
 g2o = pytest.importorskip("g2opy")
 

@@ -8,9 +8,9 @@ from posegraph_datasets.generators import manhattan_world, sphere
 from posegraph_datasets.outliers import add_false_loops
 
 import posegraph
-from posegraph.api import GNC_QUANTILE
 from posegraph.benchmarks.robust import gtsam_gnc
-from posegraph.robust import default_width
+from posegraph.robust.kernels import default_width
+from posegraph.robust.spec import GNC_QUANTILE
 
 gtsam = pytest.importorskip("gtsam")
 bridge = pytest.importorskip("posegraph.validation.gtsam_bridge")

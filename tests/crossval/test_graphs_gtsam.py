@@ -9,11 +9,11 @@ from posegraph_datasets.paths import BEST_KNOWN_ERROR
 
 import posegraph
 from posegraph.benchmarks.incremental import gtsam_stream, stream
-from posegraph.factors import linearize_between, linearize_priors
 from posegraph.io import ReadOptions, read_graph
 from posegraph.lie import SE2, SE3, Sim3
-from posegraph.linear import NormalEquations
-from posegraph.solvers import SolverOptions, optimize
+from posegraph.problem.factors import linearize_between, linearize_priors
+from posegraph.problem.linear import NormalEquations
+from posegraph.solvers import SolverOptions, solve
 
 from ..conftest import cull, gnss_track, random_graph
 
@@ -145,7 +145,7 @@ def test_edge2_files_are_read_as_gtsam_reads_them(gtsam_dataset, name, edge2_ord
     graph = read_graph(path, ReadOptions(edge2_order=edge2_order)).graph
     assert factors.size() == graph.num_edges
     assert _our_error_and_gradient(graph)[0] == pytest.approx(factors.error(values), rel=1e-9)
-    ours = optimize(graph)
+    ours = solve(graph)
     _, our_optimum = bridge.graph_to_gtsam(graph, ours.values)
     assert factors.error(our_optimum) == pytest.approx(ours.summary.final_error, rel=1e-9)
     theirs = factors.error(gtsam.LevenbergMarquardtOptimizer(factors, values).optimize())
@@ -199,13 +199,14 @@ def test_a_map_with_culled_keyframes_reaches_gtsams_optimum_of_what_remains():
     re-linked): the warm-started solve ends at gtsam LM's optimum of the graph that remains,
     from the same values."""
     graph, _ = sphere(rings=8, poses_per_ring=20, seed=5)
-    posegraph.optimize(graph)
+    smoother = posegraph.Smoother(graph)
+    smoother.optimize()
     for node in (25, 50, 75, 101):
-        cull(graph, node)
+        cull(smoother, node)
     assert graph.num_nodes == 156 and not graph.has_node(50)
     factors, values = bridge.graph_to_gtsam(graph)
     theirs = factors.error(gtsam.LevenbergMarquardtOptimizer(factors, values).optimize())
-    ours = posegraph.optimize(graph).summary
+    ours = smoother.optimize().summary
     assert ours.initialization == "warm start" and ours.iterations
     assert ours.final_error == pytest.approx(theirs, rel=1e-6)
 
@@ -227,7 +228,7 @@ def test_optimum_is_gtsams_or_lower(shared_dataset, name):
     graph = read_graph(shared_dataset(name)).graph
     best = _gtsam_optimum(graph)
     for options in (SolverOptions(), SolverOptions(method="dogleg")):
-        ours = optimize(graph.copy(), options=options).summary.final_error
+        ours = solve(graph.copy(), options=options).summary.final_error
         assert ours <= best * (1 + 1e-6), options.method
 
 
@@ -235,7 +236,7 @@ def test_optimum_is_gtsams_or_lower(shared_dataset, name):
 def test_odometry_initialised_graphs_reach_the_best_known_error(shared_dataset, name):
     result = read_graph(shared_dataset(name))
     assert result.nodes_without_vertex.size == result.graph.num_nodes
-    ours = optimize(result.graph).summary.final_error
+    ours = solve(result.graph).summary.final_error
     assert ours <= BEST_KNOWN_ERROR[name] * (1 + 1e-6)
 
 

@@ -8,7 +8,7 @@ from posegraph_datasets.generators import manhattan_world
 from posegraph_datasets.outliers import add_false_loops
 
 import posegraph
-from posegraph.api import robust_mask
+from posegraph.robust.spec import robust_mask
 
 gtsam = pytest.importorskip("gtsam")
 bridge = pytest.importorskip("posegraph.validation.gtsam_bridge")
@@ -43,9 +43,10 @@ def test_marginals_after_a_robust_solve_weigh_edges_as_gtsams_robust_noise_model
     graph, _ = manhattan_world(num_poses=150, seed=91)
     corrupted, _ = add_false_loops(graph, 0.1, seed=0)
     width = 2.5
-    posegraph.optimize(corrupted, robust=f"huber:{width}")
+    smoother = posegraph.Smoother(corrupted)
+    smoother.optimize(robust=f"huber:{width}")
     nodes = np.random.default_rng(92).choice(corrupted.node_ids[1:], 6, replace=False)
-    ours = posegraph.marginals(corrupted, nodes)
+    ours = posegraph.marginals(smoother, nodes)
     factors, values = bridge.graph_to_gtsam(
         corrupted, huber=(robust_mask(corrupted, "loops"), width)
     )

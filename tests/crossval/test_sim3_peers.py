@@ -7,9 +7,9 @@ import pytest
 from posegraph_datasets.monocular import monocular_sequence
 
 import posegraph
-from posegraph.chordal import chordal_values
-from posegraph.factors import chi2
-from posegraph.scale_drift import lifting_scale_information
+from posegraph.init.chordal import chordal_values
+from posegraph.problem.factors import chi2
+from posegraph.sim3.scale_drift import lifting_scale_information
 
 gtsam = pytest.importorskip("gtsam")
 bridge = pytest.importorskip("posegraph.validation.gtsam_bridge")

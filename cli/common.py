@@ -1,0 +1,196 @@
+"""What every subcommand shares: its read options and inputs, the checks of its outputs
+before any work, the solving options, and how it prints (text or one JSON document)."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import dataclasses
+import json
+import math
+import os
+from collections.abc import Iterator
+
+import posegraph
+from posegraph.io import ReadOptions, ReadResult, read_graph
+from posegraph.io.atomic import check_replaceable
+from posegraph.io.conversion import GRAPH_FORMATS, load_trajectory, output_format, unwritable_to
+from posegraph.io.trajectories import Trajectory
+from posegraph.lie import LieGroup
+from posegraph.solvers import SolverOptions, Summary
+
+from .errors import UsageError, warn
+from .progress import Progress
+
+
+def read_options(args: argparse.Namespace) -> ReadOptions:
+    return ReadOptions(
+        lenient=args.lenient,
+        g2o_rotation_information=args.g2o_rotation_information,
+        identity_information=args.identity_information,
+        edge2_order=args.edge2_order,
+        scale_information=args.scale_information,
+    )
+
+
+class Inputs:
+    """A command's input files, read with its options. What lenient reading skipped is kept for
+    the JSON document (``skipped_lines``) and, with ``warn_skipped`` in text mode, reported on
+    stderr as soon as it is read: the results leave out what those lines say (a node whose
+    vertex line was skipped keeps its edges)."""
+
+    def __init__(self, args: argparse.Namespace, warn_skipped: bool = True) -> None:
+        self.options = read_options(args)
+        self.warn_skipped = warn_skipped and talks(args)
+        self.skipped_lines: list[dict] = []
+
+    def graph(self, path: str) -> ReadResult:
+        read = read_graph(path, self.options)
+        self.skipped_lines += [
+            {"path": path, "reason": why, "count": count, "first_line": line}
+            for why, count, line in read.skipped_by_reason()
+        ]
+        if read.skipped and self.warn_skipped:
+            warn(f"{path}: {read.skipped_report()}; the results leave out what those lines say")
+        return read
+
+    def trajectory(self, path: str) -> Trajectory:
+        return load_trajectory(path, self.graph)
+
+
+def json_safe(value):
+    """``value`` with every float that is not finite as None (JSON has no NaN or ∞)."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {key: json_safe(item) for key, item in value.items()}
+    if isinstance(value, list | tuple):
+        return [json_safe(item) for item in value]
+    return value
+
+
+def talks(args: argparse.Namespace) -> bool:
+    """Whether the command reports as text on the terminal: neither ``--json`` nor ``--quiet``
+    (progress and warnings are shown then)."""
+    return not (args.json or args.quiet)
+
+
+def emit(args: argparse.Namespace, record: dict, text: str) -> None:
+    if args.json:
+        print(json.dumps(json_safe(record), indent=2, allow_nan=False))
+    elif not args.quiet:
+        print(text)
+
+
+def refuse_to_overwrite(source: str, target: str | None, allowed: bool) -> None:
+    if target and not allowed and os.path.exists(target) and os.path.samefile(source, target):
+        raise UsageError(
+            "refusing to overwrite the input file; pass --overwrite to allow it", source
+        )
+
+
+def check_output(
+    path: str | None,
+    to: str | None = None,
+    figure: bool = False,
+    text: bool = False,
+    remedy: str = "",
+) -> None:
+    """Fail before any work if ``path`` cannot be written: a format not known by its suffix
+    (or ``to``; a ``figure``'s by matplotlib; ``text`` has one format; ``remedy`` follows that
+    refusal), a folder that does not exist, or a read-only file."""
+    if path is None:
+        return
+    try:
+        if figure:
+            from posegraph.plotting import check_figure_path
+
+            check_figure_path(path)
+        elif not text:
+            output_format(path, to)
+    except ValueError as error:  # its message starts with the path, which UsageError adds
+        raise UsageError(str(error).removeprefix(f"{path}: ") + remedy, path) from None
+    folder = os.path.dirname(path) or "."
+    if not os.path.isdir(folder):
+        raise UsageError(f"cannot write: there is no folder {folder}", path)
+    if os.path.isdir(path):
+        raise UsageError("is a folder, not a file", path)
+    check_replaceable(path)
+
+
+def check_drop_rejected(args: argparse.Namespace) -> None:
+    """``--drop-rejected`` needs a robust run, and a graph file to leave its rejections out of."""
+    if not args.drop_rejected:
+        return
+    if args.robust is None:
+        raise UsageError("--drop-rejected needs --robust: only a robust run rejects measurements")
+    if args.output is None or output_format(args.output) not in GRAPH_FORMATS:
+        raise UsageError(
+            "--drop-rejected leaves the rejected edges out of the graph that -o writes: give -o a"
+            " g2o or TORO file",
+            args.output,
+        )
+
+
+def output_graph(
+    args: argparse.Namespace, smoother: posegraph.Smoother
+) -> tuple[posegraph.PoseGraph, str | None]:
+    """The graph that ``-o`` gets (without the rejected measurements, with ``--drop-rejected``)
+    and how the report names the file."""
+    graph = smoother.graph
+    if not args.drop_rejected:
+        return graph, args.output
+    inliers = smoother.without_rejected()
+    left_out = f"{graph.num_edges - inliers.num_edges} rejected edge(s)"
+    if len(inliers.priors) < len(graph.priors):
+        left_out += f" and {len(graph.priors) - len(inliers.priors)} rejected prior(s)"
+    return inliers, f"{args.output} (without the {left_out})"
+
+
+def check_writable(
+    source: str,
+    graph: posegraph.PoseGraph,
+    path: str | None,
+    to: str | None = None,
+    group: type[LieGroup] | None = None,
+) -> None:
+    """Fail before any work if the graph read from ``source`` (lifted to ``group``, if given)
+    cannot be written to ``path`` as ``to`` (``posegraph.io.conversion.unwritable_to``)."""
+    reason = None if path is None else unwritable_to(graph, path, to, group)
+    if reason is not None:
+        raise UsageError(reason, source)
+
+
+@contextlib.contextmanager
+def about(*paths: str) -> Iterator[None]:
+    """Report a library ``ValueError`` as one line that starts with the input's path (or
+    "A against B" for two)."""
+    try:
+        yield
+    except ValueError as error:
+        if len(paths) == 1:
+            raise UsageError(str(error), paths[0]) from None
+        raise UsageError(f"{' against '.join(paths)}: {error}") from None
+
+
+def solving_options(args: argparse.Namespace) -> dict:
+    """``optimize``'s keyword arguments from the solving options (``--solver``, ``--init``,
+    ``--robust…``, ``--max-iterations``, ``--time-limit``)."""
+    robust = None
+    if args.robust is not None:
+        try:
+            robust = posegraph.RobustSpec.parse(args.robust, args.robust_edges, args.robust_priors)
+        except ValueError as error:
+            raise UsageError(f"--robust: {error}") from None
+    options = SolverOptions(
+        method=args.solver, max_iterations=args.max_iterations, time_limit=args.time_limit
+    )
+    return {"init": args.init, "options": options, "robust": robust}
+
+
+def noting_interruption(progress: Progress, summary: Summary) -> Summary:
+    """The summary, saying that a run that Ctrl-C stopped did not converge, whatever its last
+    iteration said."""
+    if not progress.interrupted:
+        return summary
+    return dataclasses.replace(summary, termination="interrupted (Ctrl-C)", converged=False)

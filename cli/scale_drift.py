@@ -1,0 +1,119 @@
+"""``posegraph scale-drift``: correct a monocular trajectory's scale drift in Sim3, report the
+ATE before and after against ground truth, and write the poses or the Sim3 graph."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+
+import posegraph
+from posegraph.io import ReadResult
+from posegraph.io.conversion import convert as convert_graph
+from posegraph.io.conversion import output_format
+from posegraph.io.trajectories import Trajectory, write_trajectory
+from posegraph.sim3.scale_drift import correct_scale_drift
+from posegraph.trajectory.evaluation import evaluate
+
+from .common import (
+    Inputs,
+    about,
+    check_drop_rejected,
+    check_output,
+    check_writable,
+    emit,
+    noting_interruption,
+    output_graph,
+    refuse_to_overwrite,
+    solving_options,
+    talks,
+)
+from .errors import EXIT_NOT_CONVERGED, EXIT_OK, warn
+from .progress import Progress
+from .summary import format_scale_drift
+
+NO_SIM3_EDGE = (
+    "no Sim3 edge: each loop closure only says that its ends share one scale, which corrects"
+    " scale drift only where its translation is metric; Sim3 loop closures (EDGE_SIM3:EXPMAP)"
+    " carry the scale change"
+)
+
+
+def scale_drift(args: argparse.Namespace) -> int:
+    refuse_to_overwrite(args.input, args.output, args.overwrite)
+    check_output(args.output)
+    check_output(args.plot, figure=True)
+    check_drop_rejected(args)
+    solving = solving_options(args)
+    inputs = Inputs(args)
+    read = inputs.graph(args.input)
+    graph = read.graph
+    if graph.group is posegraph.SE3 and talks(args):
+        warn(f"{args.input}: {NO_SIM3_EDGE}")
+    if graph.group is not posegraph.SE2:  # refused below, by the correction
+        check_writable(args.input, graph, args.output, group=posegraph.Sim3)
+    truth = inputs.trajectory(args.gt) if args.gt else None  # read before the work
+    before = Trajectory.of_graph(graph)
+    with Progress(talks(args), args.solver) as progress:
+        with about(args.input):  # a graph it cannot correct (SE2), values beyond doubles
+            correction = correct_scale_drift(
+                graph, args.scale_information, args.convention, callback=progress, **solving
+            )
+    summary = noting_interruption(progress, correction.result.summary)
+    result = dataclasses.replace(correction.result, summary=summary)
+    correction = dataclasses.replace(correction, result=result)
+    # Lifted by the reader (a file mixing SE3 and Sim3) or by the correction (SE3 only).
+    lifted = read.lifted_scale_information
+    if lifted is None:
+        lifted = correction.lifted_scale_information
+    after = Trajectory.of_graph(correction.graph, correction.poses)  # as asked for
+    corrected = Trajectory.of_graph(correction.graph)  # world-from-camera
+    wrote = _write_corrected(args, read, correction, after)
+    ate = None
+    if truth is not None:
+        ate = tuple(evaluate(poses, truth, "se3").ate.rmse for poses in (before, corrected))
+    if args.plot:
+        _plot_correction(args, before, corrected, truth)
+    record = {
+        "command": "scale-drift",
+        "input": args.input,
+        "output": args.output,
+        "plot": args.plot,
+        "convention": args.convention,
+        "nodes": graph.num_nodes,
+        "edges": graph.num_edges,
+        "scale_range": [float(correction.scales.min()), float(correction.scales.max())],
+        "lifted_scale_information": lifted,
+        "summary": summary.as_dict(),
+        "ate_before": ate[0] if ate else None,
+        "ate_after": ate[1] if ate else None,
+        "skipped_lines": inputs.skipped_lines,
+    }
+    written = {"wrote": wrote, "plotted": args.plot}
+    text = format_scale_drift(args.input, correction, ate, written, lifted)
+    emit(args, record, text)
+    return EXIT_OK if summary.converged else EXIT_NOT_CONVERGED
+
+
+def _write_corrected(args, read: ReadResult, correction, after: Trajectory) -> str | None:
+    """``scale-drift``'s ``-o``: the corrected poses (TUM or KITTI) or the Sim3 graph. Returns
+    how the report names it."""
+    output, wrote = output_graph(args, correction.smoother)
+    if args.output:
+        written = output_format(args.output)
+        if written in ("tum", "kitti"):
+            write_trajectory(after, args.output, written)
+        else:
+            convert_graph(output, args.output, written, sim3_dialect=read.sim3_dialect or "a")
+    return wrote
+
+
+def _plot_correction(args, before: Trajectory, corrected: Trajectory, truth) -> None:
+    """``scale-drift --plot``: the trajectories before and after (and the ground truth)."""
+    from posegraph.plotting import plot_trajectories
+
+    curves = [("before", before.positions), ("corrected", corrected.positions)]
+    if truth is not None:
+        curves.append(("ground truth", truth.positions))
+    title = f"scale-drift correction: {os.path.basename(args.input)} (top view)"
+    plot_trajectories(curves, args.plot, title=title, view="top")

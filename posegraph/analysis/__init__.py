@@ -1,0 +1,1 @@
+"""What a solved graph tells: marginal covariances and the graph doctor."""

@@ -1,0 +1,1 @@
+"""Initial values: composition along a spanning tree, chordal relaxation, and the choice."""

@@ -1,0 +1,128 @@
+"""Trajectory files: TUM (``t tx ty tz qx qy qz qw``) and KITTI (3 × 4 row-major [R | t]).
+
+A trajectory is a pair (keys, SE3 poses). For TUM the key is the time stamp column; a pose
+graph's export writes node ids there. KITTI lines have no key: the line index is the key.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..lie import SE2, SE3, LieGroup, Sim3
+from .atomic import atomic_write_text
+from .errors import GraphFileError
+from .parsing import paused_garbage_collection, quaternion_problems, read_lines
+from .writer import number_fields, refuse_non_finite
+
+if TYPE_CHECKING:
+    from ..graph import PoseGraph
+
+
+@dataclasses.dataclass(frozen=True)
+class Trajectory:
+    """Stamped poses: ``keys`` (N,) and ``poses`` (SE3, batch (N,))."""
+
+    keys: np.ndarray
+    poses: SE3
+
+    @classmethod
+    def of_graph(cls, graph: PoseGraph, values: LieGroup | None = None) -> Trajectory:
+        """A graph's poses (``values``, by default its own) keyed by node id, as SE3
+        (``as_se3``)."""
+        return cls(graph.node_ids.astype(float), as_se3(graph.values if values is None else values))
+
+    @property
+    def positions(self) -> np.ndarray:
+        return self.poses.translation
+
+
+def as_se3(values: LieGroup) -> SE3:
+    """SE3 poses of any pose group: SE2 lifted to the plane z = 0; Sim3 keeps R and t."""
+    if isinstance(values, SE3):
+        return values
+    if isinstance(values, SE2):
+        count = values.batch_shape[0]
+        rotation = np.zeros((count, 3, 3))
+        rotation[:, :2, :2] = values.rotation_matrix
+        rotation[:, 2, 2] = 1.0
+        translation = np.concatenate([values.translation, np.zeros((count, 1))], axis=1)
+        return SE3(rotation, translation)
+    if isinstance(values, Sim3):
+        return SE3(values.rotation, values.translation)
+    raise TypeError(f"no SE3 trajectory for {type(values).__name__}")
+
+
+def _text(rows: np.ndarray) -> str:
+    return "".join(" ".join(fields) + "\n" for fields in number_fields(rows))
+
+
+@paused_garbage_collection()
+def format_tum(trajectory: Trajectory) -> str:
+    q, t = trajectory.poses.as_quaternion_translation()
+    rows = np.concatenate([trajectory.keys[:, None].astype(float), t, q], axis=1)
+    return _text(rows)
+
+
+@paused_garbage_collection()
+def format_kitti(trajectory: Trajectory) -> str:
+    rows = trajectory.poses.as_matrix()[:, :3, :].reshape(-1, 12)
+    return _text(rows)
+
+
+def write_trajectory(trajectory: Trajectory, path: str, file_format: str) -> None:
+    """Write "tum" or "kitti" atomically."""
+    refuse_non_finite(path, trajectory.keys, trajectory.poses)
+    text = {"tum": format_tum, "kitti": format_kitti}[file_format](trajectory)
+    atomic_write_text(path, text)
+
+
+def _numbers(path: str, lines: list, width: int, name: str) -> np.ndarray:
+    """The (n, ``width``) numbers of a trajectory file's lines: converted at once, or where that
+    fails, line by line, naming the first bad line."""
+    if all(len(tokens) == width for _, tokens in lines):
+        with contextlib.suppress(ValueError):
+            numbers = np.array([tokens for _, tokens in lines], dtype=float)
+            if np.isfinite(numbers).all():
+                return numbers
+    rows = []
+    for number, tokens in lines:
+        if len(tokens) != width:
+            raise GraphFileError(
+                path, number, f"{name} lines have {width} numbers, found {len(tokens)}"
+            )
+        try:
+            row = np.array(tokens, dtype=float)
+        except ValueError:
+            raise GraphFileError(path, number, "a value is not a number") from None
+        if not np.all(np.isfinite(row)):
+            raise GraphFileError(path, number, "NaN or infinite value")
+        rows.append(row)
+    return np.array(rows)
+
+
+def read_trajectory(path: str, file_format: str) -> Trajectory:
+    """Read "tum" or "kitti"; errors name ``file:line``."""
+    lines = read_lines(path)
+    width = {"tum": 8, "kitti": 12}[file_format]
+    if not lines:
+        raise GraphFileError(path, None, f"holds no {file_format.upper()} poses")
+    numbers = _numbers(path, lines, width, file_format.upper())
+    if file_format == "tum":
+        problems = quaternion_problems(numbers[:, 4:8])
+        if problems:
+            first = min(problems)
+            raise GraphFileError(path, lines[first][0], problems[first])
+        return Trajectory(
+            numbers[:, 0], SE3.from_quaternion_translation(numbers[:, 4:8], numbers[:, 1:4])
+        )
+    matrices = numbers.reshape(-1, 3, 4)
+    rotation = matrices[:, :, :3]
+    if np.abs(rotation @ np.swapaxes(rotation, 1, 2) - np.eye(3)).max() > 1e-3:
+        raise GraphFileError(path, None, "a 3 × 3 block is not a rotation matrix")
+    return Trajectory(
+        np.arange(len(numbers), dtype=float), SE3(rotation, matrices[:, :, 3]).normalize()
+    )

@@ -1,0 +1,351 @@
+"""Sparse Cholesky backends for a fixed sparsity pattern: analyse once, factorise many times.
+
+* ``cholmod``: SuiteSparse CHOLMOD through the cvxopt wheel (supernodal, AMD ordering), given
+  the lower triangle; the faster of the two. Covariances of many columns by selected inversion
+  of its factor.
+* ``scipy``: SuperLU in symmetric mode with a minimum-degree ordering computed once and reused
+  (``permc_spec="NATURAL"`` on the pre-permuted matrix). Pure scipy, always available.
+
+``make_cholesky(..., backend="auto")`` picks CHOLMOD when cvxopt imports, else scipy.
+A matrix that is not positive definite raises ``NotPositiveDefinite``. Both give each column's
+pivot (``pivots``): dⱼ of P A Pᵀ = L D Lᵀ (L unit lower triangular), the Schur complement's
+diagonal entry where column j is eliminated. dⱼ/Aⱼⱼ near zero marks a column that the columns
+eliminated before it nearly span.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse
+import scipy.sparse.linalg
+
+from .selected_inversion import SupernodalFactor, inverse_blocks
+
+SOLVED_COLUMNS = 96
+"""CHOLMOD's covariance blocks of up to this many columns in all come from solves, beyond from
+selected inversion, near where the two draw level (docs/architecture.md)."""
+
+
+COUPLED_COLUMNS = 300
+"""Selected inversion needs every pair of a group's columns in the factor's pattern, which makes
+a group of c columns a dense c × c block there, at c³/3 flops. Groups larger than this come
+from solves, whose cost grows linearly."""
+
+
+LONG_COLUMN = 64
+"""Columns of more entries than this count as long when a CHOLMOD pattern is built."""
+
+LONG_COLUMN_COST = 30
+"""``ones_at`` builds the long columns transposed when the sum of their squared lengths exceeds
+this many times the number of entries: where the two ways broke even, measured here."""
+
+
+def builds_transposed(counts: np.ndarray) -> np.ndarray:
+    """Which columns of these entry ``counts`` ``ones_at`` builds transposed."""
+    long = counts > LONG_COLUMN
+    if np.sum(counts[long] ** 2) <= LONG_COLUMN_COST * np.sum(counts):
+        return np.zeros_like(long)
+    return long
+
+
+def covariance_by_solves(columns: int, largest_group: int) -> bool:
+    """Whether covariance blocks of ``columns`` columns in all, at most ``largest_group`` in one
+    group, come from solves rather than selected inversion."""
+    return columns <= SOLVED_COLUMNS or largest_group > COUPLED_COLUMNS
+
+
+def ones_at(rows: np.ndarray, columns: np.ndarray, shape: tuple[int, int]):
+    """The cvxopt sparse matrix of ones at (``rows``, ``columns``), each pair once, stored
+    in column order with sorted rows.
+
+    cvxopt's triplet constructor compares each entry with every slot of its column (to sum
+    duplicates), which is quadratic in a column's length. A node that thousands of edges reach
+    (an anchor every pose is tied to) makes such columns: a 4000-pose SE3 graph spent 1.05 of
+    its 1.18 s there. When the long columns' quadratic cost outweighs one sparse addition (linear
+    in all entries; ``builds_transposed``), those columns are built transposed, where they are
+    short rows, transposed back and added."""
+    from cvxopt import matrix, spmatrix
+
+    def triplets(r: np.ndarray, c: np.ndarray, size: tuple[int, int]):
+        return spmatrix(1.0, matrix(r, tc="i"), matrix(c, tc="i"), size)
+
+    transposed = builds_transposed(np.bincount(columns, minlength=shape[1]))[columns]
+    if not transposed.any():
+        return triplets(rows, columns, shape)
+    return (
+        triplets(rows[~transposed], columns[~transposed], shape)
+        + triplets(columns[transposed], rows[transposed], shape[::-1]).T
+    )
+
+
+class NotPositiveDefinite(ArithmeticError):
+    """The matrix could not be factorised (not positive definite, or singular)."""
+
+
+class CholmodCholesky:
+    """CHOLMOD (cvxopt) with the symbolic factorisation computed once for the pattern."""
+
+    name = "cholmod"
+    inverts_selectively = True
+
+    def __init__(
+        self,
+        indices: np.ndarray,
+        indptr: np.ndarray,
+        size: int,
+        supernodal: bool = False,
+        previous: CholmodCholesky | None = None,
+    ) -> None:
+        """``supernodal`` forces an LLᵀ factor (CHOLMOD may otherwise pick LDLᵀ), which
+        ``covariance_blocks`` needs. ``previous`` is a factoriser for a leading part of this
+        pattern (see ``_lower_pattern``)."""
+        from cvxopt import cholmod, matrix, spmatrix
+
+        self._cholmod, self._matrix, self._spmatrix = cholmod, matrix, spmatrix
+        self.size = size
+        self._supernodal = supernodal
+        columns = np.repeat(np.arange(size), np.diff(indptr))
+        # CHOLMOD reads the lower triangle only (uplo="L"): passing just that halves the
+        # triplets cvxopt sorts into its matrix and the values copied per factorisation.
+        self._lower = np.flatnonzero(indices >= columns)
+        self._a = self._lower_pattern(indices[self._lower], columns[self._lower], previous)
+        self._factor = self._analyse()
+
+    def _analyse(self):
+        """CHOLMOD's symbolic factorisation of the pattern (supernodal if asked for)."""
+        cholmod = self._cholmod
+        saved = dict(cholmod.options)
+        if self._supernodal:
+            cholmod.options["supernodal"] = 2
+        try:
+            return cholmod.symbolic(self._a)
+        finally:
+            cholmod.options.clear()
+            cholmod.options.update(saved)
+
+    def _lower_pattern(self, rows: np.ndarray, columns: np.ndarray, previous):
+        """The cvxopt matrix of the lower-triangle pattern (ones). If ``previous`` holds its
+        leading n₀ × n₀ part unchanged (a graph that grew by appended nodes and edges between
+        them or to old nodes), the new rows and columns are concatenated to it, which skips
+        cvxopt's triplet sort of the whole pattern."""
+        from cvxopt import sparse
+
+        size, matrix = self.size, self._matrix
+        n0 = previous.size if previous is not None else 0
+        old = (rows < n0) & (columns < n0)
+        if not (0 < n0 <= size and np.count_nonzero(old) == previous._lower.size):
+            return ones_at(rows, columns, (size, size))
+        # ``sparse`` drops explicit zeros; previous's values are placeholders between
+        # factorisations, so they are set to ones.
+        previous._a.V = matrix(1.0, (previous._lower.size, 1))
+        below, right, k = ~old & (columns < n0), columns >= n0, size - n0
+        return sparse(
+            [
+                [previous._a, ones_at(rows[below] - n0, columns[below], (k, n0))],
+                [
+                    ones_at(rows[:0], rows[:0], (n0, k)),
+                    ones_at(rows[right] - n0, columns[right] - n0, (k, k)),
+                ],
+            ]
+        )
+
+    def factorize(self, data: np.ndarray) -> None:
+        if self._factor is None:
+            self._factor = self._analyse()
+        self._a.V = self._matrix(data[self._lower])
+        try:
+            self._cholmod.numeric(self._a, self._factor)
+        except ArithmeticError as error:
+            raise NotPositiveDefinite(str(error)) from None
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        """Solve for a vector (n,) or for every column of (n, k) at once."""
+        b = self._matrix(np.ascontiguousarray(rhs, float))
+        self._cholmod.solve(self._factor, b)
+        return np.array(b).reshape(np.shape(rhs))
+
+    def covariance_blocks(self, groups: np.ndarray) -> np.ndarray:
+        """Blocks (A⁻¹)[g, g], (G, c, c), for G groups g of c columns (G, c): by sparse solves
+        (their cost grows with each column), or, as ``covariance_by_solves`` decides and if this
+        factoriser was made ``supernodal`` (P A Pᵀ = L Lᵀ, so A⁻¹ = Pᵀ (L Lᵀ)⁻¹ P), by
+        selected inversion of L (whose cost does not), for groups whose every pair lies in
+        A's pattern."""
+        if self._supernodal and not covariance_by_solves(groups.size, groups.shape[1]):
+            return self._selected_blocks(groups)
+        return self._solved_blocks(groups)
+
+    def _solved_blocks(self, groups: np.ndarray) -> np.ndarray:
+        """Each block as Yᵀ D⁻¹ Y with Y = L⁻¹ P E_g (P A Pᵀ = L D Lᵀ, D = I for a supernodal
+        factor): sparse solves with the unit columns, for a factor of either kind."""
+        columns = groups.ravel()
+        unit = self._spmatrix(
+            1.0, columns.tolist(), list(range(columns.size)), (self.size, columns.size)
+        )
+        y = self._cholmod.spsolve(self._factor, unit, sys=7)  # P
+        y = self._cholmod.spsolve(self._factor, y, sys=4)  # L⁻¹
+        scaled = self._cholmod.spsolve(self._factor, y, sys=6)  # D⁻¹
+        y, scaled = (scipy.sparse.csc_matrix(self._compressed(m), m.size) for m in (y, scaled))
+        width = groups.shape[1]
+        parts = [slice(g * width, (g + 1) * width) for g in range(len(groups))]
+        return np.array([(y[:, part].T @ scaled[:, part]).toarray() for part in parts])
+
+    def _places(self) -> np.ndarray:
+        """Where P A Pᵀ puts each column of A."""
+        columns = self._matrix(np.arange(self.size, dtype=float))
+        self._cholmod.solve(self._factor, columns, sys=8)  # Pᵀ
+        return np.array(columns).ravel().astype(np.int64)
+
+    def _selected_blocks(self, groups: np.ndarray) -> np.ndarray:
+        """The blocks from the selected inverse of L (``posegraph.problem.selected_inversion``).
+        Reading L out (cvxopt's ``getfactor``) leaves CHOLMOD's factor spent: the next
+        ``factorize`` analyses the pattern afresh."""
+        place = self._places()
+        data, indices, indptr = self._compressed(self._cholmod.getfactor(self._factor))
+        self._factor = None
+        return inverse_blocks(SupernodalFactor(indptr, indices, data), place[groups])
+
+    def pivots(self) -> np.ndarray:
+        """Per column of A, its pivot in the last factorisation (``pivots``): L's diagonal
+        squared for a supernodal factor (P A Pᵀ = L Lᵀ, with cvxopt's default options), D for
+        a simplicial one (L D Lᵀ, where they ask for it)."""
+        try:
+            in_factor = np.array(self._cholmod.diag(self._factor)).ravel() ** 2
+        except ValueError:  # not supernodal: D⁻¹ 1 gives 1/D
+            inverse = self._matrix(1.0, (self.size, 1))
+            self._cholmod.solve(self._factor, inverse, sys=6)
+            in_factor = 1.0 / np.array(inverse).ravel()
+        return in_factor[self._places()]
+
+    @staticmethod
+    def _compressed(matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(data, indices, indptr) of a cvxopt sparse matrix's compressed columns: views of the
+        copy that ``CCS`` makes (the factor of a 50,000-pose sphere took 2.8 s and two more
+        copies through ``numpy.array``), not of ``matrix``."""
+        indptr, indices, data = (np.asarray(part).ravel() for part in matrix.CCS)
+        return data, indices.astype(np.int64, copy=False), indptr.astype(np.int64, copy=False)
+
+
+class ScipyCholesky:
+    """SuperLU (symmetric mode, no pivoting). The first factorisation chooses a minimum-degree
+    ordering, and its factor serves; later ones factorise the matrix permuted by that ordering,
+    with no ordering work."""
+
+    name = "scipy"
+    inverts_selectively = False
+    _OPTIONS = {"diag_pivot_thresh": 0.0, "options": {"SymmetricMode": True}}
+
+    def __init__(self, indices: np.ndarray, indptr: np.ndarray, size: int) -> None:
+        self._indices, self._indptr, self._size = indices, indptr, size
+        self._order: np.ndarray | None = None
+        self._gather = self._permuted_indices = self._permuted_indptr = None
+        self._lu = None
+        self._factors_permuted = False
+        """Whether ``_lu`` factorises A[order][:, order] (else A, with its own ordering)."""
+
+    def _matrix(self, data, indices, indptr) -> scipy.sparse.csc_matrix:
+        return scipy.sparse.csc_matrix((data, indices, indptr), shape=(self._size, self._size))
+
+    def _fix_ordering(self, order: np.ndarray) -> None:
+        """Factorise A[order][:, order] from now on: its column k is A's column ``order[k]``."""
+        entries = np.arange(1, self._indices.size + 1, dtype=float)
+        permuted = self._matrix(entries, self._indices, self._indptr)[order][:, order].tocsc()
+        permuted.sort_indices()
+        self._order = order
+        self._gather = permuted.data.astype(np.int64) - 1
+        self._permuted_indices, self._permuted_indptr = permuted.indices, permuted.indptr
+
+    def factorize(self, data: np.ndarray) -> None:
+        try:
+            if self._order is None:
+                matrix = self._matrix(data, self._indices, self._indptr)
+                lu = scipy.sparse.linalg.splu(matrix, permc_spec="MMD_AT_PLUS_A", **self._OPTIONS)
+                # SuperLU's perm_c sends A's column j to position perm_c[j].
+                self._fix_ordering(np.argsort(lu.perm_c))
+                self._factors_permuted = False
+            else:
+                permuted = data[self._gather]
+                matrix = self._matrix(permuted, self._permuted_indices, self._permuted_indptr)
+                lu = scipy.sparse.linalg.splu(matrix, permc_spec="NATURAL", **self._OPTIONS)
+                self._factors_permuted = True
+        except RuntimeError as error:
+            raise NotPositiveDefinite(str(error)) from None
+        self._lu = lu
+        if np.any(lu.U.diagonal() <= 0):
+            raise NotPositiveDefinite("non-positive pivot")
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        if not self._factors_permuted:
+            return self._lu.solve(rhs)
+        x = np.empty_like(rhs)
+        x[self._order] = self._lu.solve(rhs[self._order])
+        return x
+
+    def pivots(self) -> np.ndarray:
+        """Per column, its pivot in the last factorisation (``pivots``): U's diagonal, whose
+        entry k is that of the column the ordering puts k-th (either factor)."""
+        pivots = np.empty(self._size)
+        pivots[self._order] = self._lu.U.diagonal()
+        return pivots
+
+    def covariance_blocks(self, groups: np.ndarray) -> np.ndarray:
+        """Blocks (A⁻¹)[g, g], (G, c, c), by solving for the unit columns of each group."""
+        blocks = np.empty(groups.shape + groups.shape[1:])
+        unit = np.zeros((self._size, groups.shape[1]))
+        for block, group in zip(blocks, groups, strict=True):
+            unit[group, np.arange(group.size)] = 1.0
+            block[:] = self.solve(unit)[group]
+            unit[group, np.arange(group.size)] = 0.0
+        return blocks
+
+
+BACKENDS = {"cholmod": CholmodCholesky, "scipy": ScipyCholesky}
+
+
+def available_backends() -> list[str]:
+    """Backends that import here, fastest first."""
+    names = []
+    try:
+        import cvxopt.cholmod  # noqa: F401
+
+        names.append("cholmod")
+    except ImportError:
+        pass
+    names.append("scipy")
+    return names
+
+
+def resolve_backend(backend: str) -> str:
+    """The backend that ``backend`` names, "auto" being the fastest available; ``ValueError``
+    if it is unknown or not available here."""
+    if backend == "auto":
+        return available_backends()[0]
+    if backend not in BACKENDS:
+        choices = ", ".join(BACKENDS)
+        raise ValueError(f"unknown sparse Cholesky backend {backend!r}; choose from {choices}")
+    if backend not in available_backends():
+        raise ValueError(f"backend {backend!r} is not available here (is cvxopt installed?)")
+    return backend
+
+
+def inverts_selectively(backend: str) -> bool:
+    """Whether ``backend``'s covariance blocks of many groups come from selected inversion, at
+    about the cost of a factorisation, rather than from a solve per group."""
+    return BACKENDS[resolve_backend(backend)].inverts_selectively
+
+
+def make_cholesky(
+    indices: np.ndarray,
+    indptr: np.ndarray,
+    size: int,
+    backend: str = "auto",
+    for_covariance: bool = False,
+    previous=None,
+):
+    """A factoriser for the symmetric CSC pattern (both triangles stored, sorted indices);
+    ``for_covariance`` prepares it for ``covariance_blocks``. ``previous``, a factoriser of
+    the same backend for a pattern this one grew from, may speed up the set-up."""
+    backend = resolve_backend(backend)
+    if backend == "cholmod":
+        grown_from = previous if isinstance(previous, CholmodCholesky) else None
+        return CholmodCholesky(indices, indptr, size, for_covariance, grown_from)
+    return ScipyCholesky(indices, indptr, size)

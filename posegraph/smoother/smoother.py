@@ -1,0 +1,312 @@
+"""``Smoother``: the back-end object. It owns a pose graph and everything that a later call
+reuses: the last solution (warm starts, GNC's decisions, the weights of covariances), and the
+normal equations with their sparsity pattern, symbolic factorisation and linearisation."""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from ..graph import PoseGraph, measurement_mask
+from ..init.choice import choose, initialize
+from ..problem.linear import NormalEquations
+from ..robust.kernels import Robustifier
+from ..robust.run import cost, robust_solve, with_robust_record
+from ..robust.spec import Kernel, RobustSpec, resolve
+from ..solvers import STOPPED, TIME_LIMIT, Callback, Result, SolverOptions, solve
+from . import warm_start
+from .solution import GncProblem, Solution
+
+
+@dataclasses.dataclass(frozen=True)
+class _Start:
+    """How a call starts: the initialisation's name, what it reused, whether the solution
+    extends to the grown graph (nothing to solve), and GNC's carried decisions."""
+
+    init: str
+    reused: tuple[str, ...] = ()
+    composed: bool = False
+    standing: np.ndarray | None = None
+    decisions: np.ndarray | None = None
+
+
+class Smoother:
+    """A pose graph kept optimal across edits, as a SLAM back end calls it after every keyframe::
+
+        smoother = posegraph.Smoother(graph)
+        graph.add_node(k); graph.add_edge(k - 1, k, odometry, information)
+        result = smoother.optimize()           # warm-starts from the last solution
+        covariance = smoother.marginals([k])[0]
+
+    The graph holds data only; the smoother keeps the last ``solution`` and the last solve's
+    normal equations, which a later call reuses while the graph's structure allows. Edit the
+    graph directly to add; remove through the smoother (``remove_nodes``, ``remove_edges``,
+    ``remove_priors``), which carries the last solution's weights and GNC's decisions to the
+    measurements that remain."""
+
+    def __init__(self, graph: PoseGraph) -> None:
+        self.graph = graph
+        self.solution: Solution | None = None
+        """What the last ``optimize`` left in the graph's values (None before the first)."""
+        self._last: tuple[tuple[int, str], Result] | None = None
+        """The last least-squares or IRLS solve on the graph, keyed by the graph's structure
+        version and the linear solver: its normal equations and linearisation."""
+
+    def __getstate__(self) -> dict:
+        """Pickled and deep-copied without the last solve's normal equations (CHOLMOD handles
+        cannot be pickled); a copy builds them anew on its next call and still warm-starts."""
+        return {**self.__dict__, "_last": None}
+
+    @property
+    def optimized(self) -> bool:
+        """Whether the graph's values hold a solution of ``optimize`` (the next call warm-starts)."""
+        return self.solution is not None
+
+    def optimize(
+        self,
+        init: str = "auto",
+        options: SolverOptions | None = None,
+        callback: Callback | None = None,
+        robust: str | RobustSpec | None = None,
+        robust_edges: str | np.ndarray = "loops",
+        robust_priors: bool = False,
+    ) -> Result:
+        """Initialise the graph's values by ``init``, minimise its cost, and leave the solution
+        in the graph's values; ``posegraph.optimize`` documents the arguments.
+
+        "auto" on a smoother that solved before warm-starts (``warm_start``): the solved nodes
+        keep their values, nodes added since are composed and refined alone; in least squares
+        it restarts from chordal relaxation where the new measurements disagree with the
+        solution (``warm_start.RESTART``), and solves nothing where all that was added hangs off
+        a converged solution by a tree of edges (``warm_start.COMPOSED``). A GNC call carries
+        the last run's decisions where the graph has only grown (``warm_start.previous_decisions``).
+        ``summary.reused`` says what was reused."""
+        options = options or SolverOptions()
+        spec = (
+            RobustSpec.parse(robust, robust_edges, robust_priors)
+            if isinstance(robust, str)
+            else robust
+        )
+        began = time.perf_counter()
+        kernel = None if spec is None else resolve(spec, self.graph)  # checked before any work
+        input_error = cost(self.graph, kernel) if self.graph.initialized.all() else None
+        start = self._start(init, kernel, options)
+        initialization_time = time.perf_counter() - began
+        result, edge_weights, prior_weights = self._solve(start, kernel, options, callback)
+        summary = dataclasses.replace(
+            result.summary,
+            initialization=start.init,
+            initialization_time=initialization_time,
+            reused=start.reused + result.summary.reused,
+            input_error=input_error,
+            total_time=time.perf_counter() - began,
+        )
+        result = dataclasses.replace(result, summary=summary)
+        final = (
+            kernel is not None
+            and kernel.spec.gnc
+            and not (summary.termination in (STOPPED, TIME_LIMIT) or options.max_iterations == 0)
+        )
+        graph = self.graph
+        graph.set_values(result.values)
+        self.solution = Solution(
+            graph.edges,
+            graph.priors,
+            edge_weights,
+            prior_weights,
+            graph.fixed.copy(),
+            result.values,
+            summary,
+            GncProblem(kernel.spec, kernel.measured) if final else None,
+        )
+        return result
+
+    def _start(self, init: str, kernel: Kernel | None, options: SolverOptions) -> _Start:
+        """The graph's starting values, set by ``init`` (a warm start where the smoother solved
+        before and ``init`` is "auto")."""
+        graph, solution = self.graph, self.solution
+        if init == "auto" and solution is not None:
+            return self._warm_start(kernel, options)
+        if init == "file":
+            graph.require_values("add them with values or use init='auto'")
+        else:
+            if init == "auto":
+                init = "odometry" if kernel is not None else choose(graph)
+            graph.set_values(initialize(graph, init))
+        return _Start(init)
+
+    def _warm_start(self, kernel: Kernel | None, options: SolverOptions) -> _Start:
+        graph, solution = self.graph, self.solution
+        solved = int(graph.initialized.sum())
+        decisions = standing = None
+        if kernel is not None and kernel.spec.gnc:
+            decisions = warm_start.previous_decisions(graph, solution, kernel)
+        if decisions is not None and warm_start.standing_decisions(
+            graph, solution, kernel.measured
+        ):
+            standing = decisions
+        if kernel is not None:
+            same_problem = standing is not None
+        else:
+            same_problem = solution.summary.robust is None
+        composed = same_problem and warm_start.solution_extends(graph, solution)
+        if composed:
+            solved = len(solution.fixed)
+            warm_start.compose_new_nodes(graph, np.arange(graph.num_nodes) >= solved)
+            init = "warm start"
+        else:
+            init = warm_start.warm_start(graph, solution, options, least_squares=kernel is None)
+        reused = (f"previous solution ({solved} nodes)",) if init == "warm start" else ()
+        if standing is not None:
+            reused += (
+                f"GNC's decisions ({np.count_nonzero(~standing)} rejected; nothing added since"
+                " is under the kernel)",
+            )
+        return _Start(init, reused, composed, standing, decisions)
+
+    def _solve(
+        self, start: _Start, kernel: Kernel | None, options: SolverOptions, callback
+    ) -> tuple[Result, np.ndarray, np.ndarray]:
+        """The solve from the start values: (result, edge weights, prior weights)."""
+        graph = self.graph
+        if start.composed:
+            result = warm_start.composed_result(graph, self.solution, options)
+            edge_weights, prior_weights = self.solution.weights_for(graph.edges, graph.priors)
+            if kernel is not None:  # GNC's decisions stand
+                rejected = np.flatnonzero(~start.standing)
+                summary = with_robust_record(result.summary, kernel, rejected, graph)
+                result = dataclasses.replace(result, summary=summary)
+            return result, edge_weights, prior_weights
+        if kernel is None:
+            result = self._solve_warm(graph, options, callback)
+            return result, np.ones(graph.num_edges), np.ones(len(graph.priors))
+        outcome = robust_solve(
+            graph, kernel, options, callback, self._solve_warm, start.standing, start.decisions
+        )
+        return outcome.result, outcome.edge_weights, outcome.prior_weights
+
+    def _solve_warm(
+        self,
+        graph: PoseGraph,
+        options: SolverOptions,
+        callback: Callback | None,
+        weighting: Robustifier | None = None,
+    ) -> Result:
+        """``solve`` on the graph, reusing the last solve's normal equations (if the structure
+        is unchanged; the solver grows them if the graph only grew) and linearisation (where it
+        still holds), and keeping this solve's for the next."""
+        previous = None
+        if self._last is not None and self._last[0][1] == options.linear_solver:
+            previous = self._last[1]
+        system = self.current_system(options.linear_solver)
+        result = solve(
+            graph, options, callback, system=system, weighting=weighting, previous=previous
+        )
+        self._last = ((graph.structure_version, options.linear_solver), result)
+        return result
+
+    def current_system(self, linear_solver: str) -> NormalEquations | None:
+        """The normal equations of the last solve with ``linear_solver``, if the graph's structure
+        has not changed since (their pattern and symbolic factorisation still hold); else None."""
+        system = self.last_system(linear_solver)
+        if system is None or self._last[0][0] != self.graph.structure_version:
+            return None
+        return system
+
+    def last_system(self, linear_solver: str) -> NormalEquations | None:
+        """The normal equations of the last solve with ``linear_solver``, whatever changed since
+        (a pattern that new ones may grow from), or None."""
+        if self._last is None or self._last[0][1] != linear_solver:
+            return None
+        return self._last[1].system
+
+    def current_normal_matrix(self, values, linear_solver: str) -> np.ndarray | None:
+        """H's CSC data at ``values``, in the pattern of ``current_system(linear_solver)``, if
+        the last least-squares solve assembled it there and the graph's measurements are those
+        it solved; else None."""
+        if self.current_system(linear_solver) is None:
+            return None
+        return self._last[1].linearization.normal_matrix_for(self.graph, values)
+
+    def weights(self) -> tuple[np.ndarray, np.ndarray]:
+        """The weights of the graph's between edges and priors in the last solution
+        (``Solution.weights_for``: 1 for those added since), or all 1 before any."""
+        graph = self.graph
+        if self.solution is None:
+            return np.ones(graph.num_edges), np.ones(len(graph.priors))
+        return self.solution.weights_for(graph.edges, graph.priors)
+
+    def rejected(self) -> tuple[np.ndarray, np.ndarray]:
+        """Masks over the between edges and over the priors of those that the last robust
+        ``optimize`` rejected (``Solution.rejected_for``: none added since); none without one."""
+        graph = self.graph
+        if self.solution is None:
+            return np.zeros(graph.num_edges, dtype=bool), np.zeros(len(graph.priors), dtype=bool)
+        return self.solution.rejected_for(graph.edges, graph.priors)
+
+    def without_rejected(self) -> PoseGraph:
+        """A copy of the graph without the between edges and priors that the last robust
+        ``optimize`` rejected: the inliers, to keep, to write or to solve in least squares."""
+        edges, priors = self.rejected()
+        inliers = self.graph.with_edges(~edges)
+        inliers.priors = self.graph.priors.subset(~priors)
+        return inliers
+
+    def remove_edges(self, edges) -> None:
+        """``PoseGraph.remove_edges``, the last solution's weights and rejections staying with
+        the edges that remain (``Solution.without``)."""
+        removed = measurement_mask(edges, self.graph.num_edges, "edge", "edges to remove")
+        carried = self._carried()
+        self.graph.remove_edges(removed)
+        self._carry(carried, edges=removed)
+
+    def remove_priors(self, priors) -> None:
+        """``PoseGraph.remove_priors``, the last solution staying with the priors that remain."""
+        removed = measurement_mask(priors, len(self.graph.priors), "prior", "priors to remove")
+        carried = self._carried()
+        self.graph.remove_priors(removed)
+        self._carry(carried, priors=removed)
+
+    def remove_nodes(self, node_ids) -> tuple[np.ndarray, np.ndarray]:
+        """``PoseGraph.remove_nodes`` (a culled keyframe, with every edge and prior on it); the
+        next call starts from the values that remain, and a robust one from the last run's
+        decisions on the measurements that remain. Returns the masks of what went."""
+        nodes = np.zeros(self.graph.num_nodes, dtype=bool)
+        nodes[self.graph.index(node_ids)] = True
+        carried = self._carried()
+        edges, priors = self.graph.remove_nodes(node_ids)
+        self._carry(carried, nodes, edges, priors)
+        return edges, priors
+
+    def _carried(self) -> Solution | None:
+        """The solution, if its measurements still come first and unchanged in the graph (a
+        removal can then carry it); else None, and no later call carries it anyway."""
+        solution, graph = self.solution, self.graph
+        if solution is None or not (
+            graph.edges.starts_with(solution.edges) and graph.priors.starts_with(solution.priors)
+        ):
+            return None
+        return solution
+
+    def _carry(
+        self,
+        solution: Solution | None,
+        nodes: np.ndarray | None = None,
+        edges: np.ndarray | None = None,
+        priors: np.ndarray | None = None,
+    ) -> None:
+        """After a removal (masks over the nodes, edges and priors as they were; None for none
+        of them), keep what remains of the ``_carried`` solution (``Solution.without``)."""
+        if solution is None:
+            return
+
+        def own(removed: np.ndarray | None, count: int) -> np.ndarray:
+            return np.zeros(count, dtype=bool) if removed is None else removed[:count]
+
+        self.solution = solution.without(
+            own(nodes, len(solution.fixed)),
+            own(edges, len(solution.edges)),
+            own(priors, len(solution.priors)),
+        )

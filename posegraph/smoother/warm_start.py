@@ -1,0 +1,212 @@
+"""The warm-start policy of a ``Smoother``: start from the last solution, compose what was added,
+restart where the new measurements disagree, skip the solve where the solution extends, and
+carry GNC's decisions where the graph has only grown."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from ..graph import PoseGraph, information_ranks, measured_dof
+from ..init.choice import choose, initialize
+from ..init.spanning_tree import align_to_priors, spanning_tree_values
+from ..problem.cholesky import resolve_backend
+from ..problem.factors import between_squares, chi2
+from ..robust.kernels import default_width
+from ..robust.spec import Kernel
+from ..solvers import PHASES, Result, SolverOptions, Summary, solve
+from .solution import Solution
+
+LOCAL_RELATIVE_DECREASE = 1e-4
+"""Tolerance of the warm start's refinement of new nodes (the full solve follows)."""
+LOCAL_MAX_ITERATIONS = 10
+"""Most iterations of that refinement: a start, which the full solve finishes."""
+WARM_START_QUANTILE = 0.999
+"""A warm start restarts from chordal when its new measurements' Σ rᵀΩr exceeds χ²_m(0.999)."""
+COMPOSED = (
+    "the new nodes hang off the previous solution by a tree of edges: composed, already optimal"
+)
+"""The termination of a warm start that ``solution_extends``: no iterations were needed."""
+RESTART = "chordal (restart: the new measurements disagree with the previous solution)"
+"""The initialisation of a warm start that failed ``_agree_with_solution``."""
+
+
+def warm_start(
+    graph: PoseGraph, solution: Solution, options: SolverOptions, least_squares: bool
+) -> str:
+    """Start from the previous solution, composing and refining the nodes added since
+    (``_initialize_new_nodes``); returns the initialisation's name.
+
+    A local start can sit in the wrong basin once new loop closures pull the map far (a noisy
+    graph). In least squares, when the new measurements fail ``_agree_with_solution`` on a
+    graph with loops, the values restart from chordal relaxation, as a new graph's would.
+    """
+    if not graph.initialized.all():
+        _initialize_new_nodes(graph, options)
+    if least_squares and choose(graph) == "chordal" and not _agree_with_solution(graph, solution):
+        graph.set_values(initialize(graph, "chordal"))
+        return RESTART
+    return "warm start"
+
+
+def previous_decisions(graph: PoseGraph, solution: Solution, kernel: Kernel) -> np.ndarray | None:
+    """The last GNC run's decisions, carried to the robust problem (``_robust_problem``) of the
+    grown graph: the edges (and priors, where the problem holds them) that the run kept, and
+    every measurement appended since. None unless that run solved the same problem to its end
+    (the same kernel and width, and ``kernel``'s robust class the same over its measurements)
+    and the graph has only grown since: its measurements come first and unchanged (those that
+    remain, after ``PoseGraph``'s removals: ``Solution.without``)."""
+    if solution.gnc is None or not solution.gnc.spec.same_kernel(kernel.spec):
+        return None
+    measured, measured_then = kernel.measured, solution.gnc.measured
+    old_edges, old_priors = len(solution.edges), len(solution.priors)
+    with_priors, then_with_priors = len(measured) > graph.num_edges, len(measured_then) > old_edges
+    if with_priors != then_with_priors and old_priors > 0:
+        return None  # the priors joined or left the robust problem
+    old = np.arange(old_edges)
+    if then_with_priors:
+        old = np.concatenate([old, graph.num_edges + np.arange(old_priors)])
+    if not (
+        graph.edges.starts_with(solution.edges)
+        and graph.priors.starts_with(solution.priors)
+        and np.array_equal(measured[old], measured_then)
+    ):
+        return None
+    kept = np.ones(len(measured), dtype=bool)
+    kept[:old_edges] = solution.edge_weights > 0
+    if with_priors:
+        kept[graph.num_edges : graph.num_edges + old_priors] = solution.prior_weights > 0
+    return kept
+
+
+def standing_decisions(graph: PoseGraph, solution: Solution, measured: np.ndarray) -> bool:
+    """Whether the last GNC run's ``decisions`` (``previous_decisions``) stand for the grown
+    graph: all that was added since is a tree of trusted between edges that hangs free new
+    nodes off the solved ones, nothing in ``measured``, no prior, no hold, no cycle. The TLS
+    problem over the solved nodes is then unchanged, and each new node has one place that fits
+    its edges exactly, so the decisions are as good for the grown graph as they were for the
+    old one, and a least-squares solve over them ends it."""
+    return not measured[len(solution.edges) : graph.num_edges].any() and _grew_by_a_tree(
+        graph, solution
+    )
+
+
+def _grew_by_a_tree(graph: PoseGraph, solution: Solution) -> bool:
+    """Whether all that was added to the graph since its last solution is a tree of between
+    edges that hangs the new nodes off the solved ones: the solution is an optimum (nothing
+    was removed since: ``Solution.optimal``), its edges and priors come first and unchanged,
+    and no prior, no hold and no cycle is new. Each new node then has one place that fits its
+    edges exactly, and the problem over the solved nodes is as it was."""
+    old, new_edges = len(solution.fixed), slice(len(solution.edges), None)
+    return (
+        solution.optimal
+        and graph.edges.starts_with(solution.edges)
+        and len(graph.priors) == len(solution.priors)
+        and graph.priors.starts_with(solution.priors)
+        and np.array_equal(graph.fixed[:old], solution.fixed)
+        and not graph.fixed[old:].any()
+        and _hangs_a_tree(graph.edges.i[new_edges], graph.edges.j[new_edges], old, graph.num_nodes)
+    )
+
+
+def solution_extends(graph: PoseGraph, solution: Solution) -> bool:
+    """Whether the last solution, with the new nodes composed along the new edges, is an
+    optimum of the graph, given that the problem over the solved nodes is the one it solved
+    (least squares again, or GNC's decisions standing: the caller checks): its solve converged,
+    the solved nodes still hold its values, and the graph grew by a tree (``_grew_by_a_tree``)
+    of edges whose information is full rank. The new edges' residuals are then zero and the
+    rest of the cost is at its optimum, so no solve can lower it."""
+    old = len(solution.fixed)
+    new_edges = graph.edges.subset(slice(len(solution.edges), None))
+    return (
+        solution.summary.converged
+        and graph.values[:old].same_as(solution.values)
+        and _grew_by_a_tree(graph, solution)
+        and bool(np.all(information_ranks(new_edges.information) == graph.group.dof))
+    )
+
+
+def composed_result(graph: PoseGraph, solution: Solution, options: SolverOptions) -> Result:
+    """The graph's values, an optimum by ``solution_extends``, as a result of no iterations.
+    Its error is the solution's plus that of the new edges (zero, but for rounding), and the
+    free nodes are the solution's and the new ones (the tree adds no component and no hold)."""
+    previous = solution.summary
+    new_edges = graph.edges.subset(slice(len(solution.edges), None))
+    error = previous.final_error + 0.5 * float(between_squares(graph.values, new_edges).sum())
+    new_nodes = graph.num_nodes - len(solution.fixed)
+    summary = Summary(
+        method=options.method,
+        linear_solver=resolve_backend(options.linear_solver),
+        initial_error=error,
+        final_error=error,
+        iterations=[],
+        termination=COMPOSED,
+        converged=True,
+        phase_times=dict.fromkeys(PHASES, 0.0),
+        total_time=0.0,
+        num_variables=previous.num_variables + new_nodes * graph.group.dof,
+    )
+    return Result(graph.values, summary)
+
+
+def _hangs_a_tree(i: np.ndarray, j: np.ndarray, old: int, count: int) -> bool:
+    """Whether edges (i, j) over nodes 0 … count − 1 form a tree over the nodes from ``old`` on
+    and the nodes before ``old`` taken as one: one edge per new node, and all connected."""
+    new = count - old
+    if len(i) != new:
+        return False
+    # The old nodes become node 0, and new node k becomes k − old + 1.
+    ends = np.maximum(np.stack([i, j]) - old + 1, 0)
+    adjacency = coo_matrix((np.ones(new), (ends[0], ends[1])), shape=(new + 1, new + 1))
+    return connected_components(adjacency, directed=False)[0] == 1
+
+
+def _agree_with_solution(graph: PoseGraph, solution: Solution) -> bool:
+    """Whether the measurements added since the last solution are consistent with it, by a χ²
+    innovation test: their Σ rᵀΩr at the warm start is below χ²_m(``WARM_START_QUANTILE``),
+    m = Σ rank Ω, the directions they measure (the solved nodes keep their values, so the cost
+    of the others is unchanged). Only appended measurements are tested: if some were removed
+    or changed since, this holds, as the solution still suits the measurements that remain."""
+    edges, priors = solution.edges, solution.priors
+    if not (graph.edges.starts_with(edges) and graph.priors.starts_with(priors)):
+        return True
+    new_edges = graph.edges.subset(slice(len(edges), None))
+    new_priors = graph.priors.subset(slice(len(priors), None))
+    dof = measured_dof(new_edges.information) + measured_dof(new_priors.information)
+    if dof == 0:
+        return True
+    return chi2(graph.values, new_edges, new_priors) <= default_width(dof, WARM_START_QUANTILE) ** 2
+
+
+def compose_new_nodes(graph: PoseGraph, new: np.ndarray) -> tuple[PoseGraph, np.ndarray]:
+    """Values for the ``new`` nodes (a mask), composed from the others along a spanning tree of
+    the edges that touch them (and set in the graph). Returns that local graph, the other nodes
+    held, with the new nodes' priors, and which of its nodes are new."""
+    touching = new[graph.edges.i] | new[graph.edges.j]
+    involved = new.copy()
+    involved[graph.edges.i[touching]] = involved[graph.edges.j[touching]] = True
+    local = graph.subgraph(involved, edges=touching)
+    solved = ~new[involved]
+    local.fixed = solved
+    local.priors = local.priors.subset(~solved[local.priors.i])
+    local.set_values(align_to_priors(local, spanning_tree_values(local, known=solved)))
+    graph.set_values(graph.values.set_at(np.flatnonzero(new), local.values[~solved]))
+    return local, ~solved
+
+
+def _initialize_new_nodes(graph: PoseGraph, options: SolverOptions) -> None:
+    """Values for nodes added since the last solution: compose them from solved neighbours along
+    a spanning tree (``compose_new_nodes``), then refine them alone (solved nodes held) over
+    the edges that touch them, so that the full solve starts close to its optimum."""
+    new = ~graph.initialized
+    local, local_new = compose_new_nodes(graph, new)
+    local_options = dataclasses.replace(
+        options,
+        relative_decrease=LOCAL_RELATIVE_DECREASE,
+        max_iterations=min(options.max_iterations, LOCAL_MAX_ITERATIONS),
+    )
+    refined = solve(local, local_options)
+    graph.set_values(graph.values.set_at(np.flatnonzero(new), refined.values[local_new]))

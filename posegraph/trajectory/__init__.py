@@ -1,0 +1,1 @@
+"""Trajectories against ground truth: Umeyama alignment and evaluation (ATE, RPE, KITTI drift)."""

@@ -1,0 +1,184 @@
+"""Bad input and crashes at the command line: one line, the right exit code, a JSON document with
+``--json``."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from posegraph.io import write_graph
+from tests.cli.helpers import EXAMPLE, EXAMPLE_2D, jsonschema, run, run_json
+
+from ..conftest import sim3_scale_chain
+from ..io.malformed import MALFORMED
+from ..io.test_malformed import write_case
+
+
+def test_numbers_that_overflow_are_reported_and_nothing_is_written(tmp_path):
+    """A vertex at 1e200: its residuals' squares overflow, so the error is ∞ at the file's
+    values, from which ``--init file`` cannot move. (An edge that large is refused on its line:
+    the malformed corpus.)"""
+    lines = open(EXAMPLE_2D).read().splitlines()
+    vertex = next(k for k, line in enumerate(lines) if line.startswith("VERTEX_SE2 5 "))
+    fields = lines[vertex].split()
+    fields[2] = "1e200"
+    lines[vertex] = " ".join(fields)
+    huge, out = tmp_path / "huge.g2o", tmp_path / "out.g2o"
+    huge.write_text("\n".join(lines) + "\n")
+    failed = run("optimize", huge, "-o", out, "--init", "file", check_exit=2)
+    assert "the optimisation ended with error" in failed.stderr
+    assert "Nothing written" in failed.stderr and "Warning" not in failed.stderr
+    assert not out.exists()
+    diagnosis = run_json("info", huge)
+    assert diagnosis["initial_error"] is None  # not finite: JSON has no ∞
+    problems = [problem["what"] for problem in diagnosis["problems"]]
+    assert any("residuals overflow" in problem for problem in problems)
+    # The first-order test cannot be made where the Jacobians overflow: no false finding.
+    assert not any("move together" in problem for problem in problems), problems
+
+
+def test_an_initialisation_beyond_double_precision_is_reported_naming_the_file(tmp_path):
+    """Sim3 odometry that multiplies the scale by e^200 at every step (``sim3_scale_chain``):
+    composed from the first pose, the fifth and sixth lie beyond double precision. One line
+    names the file and the nodes."""
+    source, out = tmp_path / "scales.g2o", tmp_path / "out.g2o"
+    write_graph(sim3_scale_chain(), str(source))
+    failed = run("optimize", source, "-o", out, check_exit=2)
+    assert failed.stderr == (
+        f"posegraph: error: {source}: the odometry initialisation composes the measurements to"
+        " values beyond double precision at nodes 4, 5: a translation or scale too large to"
+        " hold\n"
+    )
+    assert not out.exists()
+
+
+def test_numeric_arguments_are_checked_by_the_parser():
+    """Counts and limits out of range stop at parsing (exit 2), naming the argument."""
+    cases = [
+        (["optimize", EXAMPLE, "--max-iterations", "-3"], "--max-iterations: must be ≥ 0"),
+        (["optimize", EXAMPLE, "--time-limit", "-1"], "--time-limit: must be ≥ 0"),
+        (["optimize", EXAMPLE, "--max-iterations", "x"], "--max-iterations: not an integer"),
+        (["eval", EXAMPLE, EXAMPLE, "--delta", "0"], "--delta: must be ≥ 1"),
+        (
+            ["eval", EXAMPLE, EXAMPLE, "--max-time-difference", "-0.1"],
+            "--max-time-difference: must be ≥ 0",
+        ),
+        (["bench", "--repeats", "0"], "--repeats: must be ≥ 1"),
+        (["bench", "--rounds", "0"], "--rounds: must be ≥ 1"),
+        (["bench", "--budget", "-0.5"], "--budget: must be ≥ 0"),
+        (
+            ["scale-drift", EXAMPLE, "--scale-information", "0"],
+            "must be positive and finite, not 0",
+        ),
+        (["info", EXAMPLE, "--scale-information", "-1"], "must be positive and finite, not -1"),
+        (
+            ["optimize", EXAMPLE, "--scale-information", "nan"],
+            "must be positive and finite, not nan",
+        ),
+    ]
+    for args, message in cases:
+        failed = run(*args, check_exit=2)
+        assert message in failed.stderr and "Traceback" not in failed.stderr, args
+
+
+def test_an_internal_error_is_one_line(monkeypatch, capsys):
+    """A crash is reported as its first line only (a message can span pages, as gtsam's do)."""
+    from posegraph_cli import commands, main
+
+    def crash(args):
+        raise RuntimeError("first line\n" + "page of detail\n" * 100)
+
+    monkeypatch.setattr(commands, "info", crash)
+    assert main.main(["info", EXAMPLE]) == main.EXIT_INTERNAL
+    stderr = capsys.readouterr().err
+    assert stderr == (
+        "posegraph: error: internal error: RuntimeError: first line (rerun with --debug)\n"
+    )
+
+
+def test_with_json_a_stop_is_a_document_on_stdout_too(tmp_path, monkeypatch, capsys):
+    """A script that reads stdout learns why a command stopped: the stderr line, the exit code,
+    and the file and line at fault, where there is one."""
+    from posegraph_cli import commands, main
+    from posegraph_cli.schema import ERROR
+
+    bad = tmp_path / "bad.g2o"
+    bad.write_text("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0 0\n")
+    unreadable = tmp_path / "folder.g2o"
+    unreadable.mkdir()
+    folder = tmp_path / "folder.png"
+    folder.mkdir()
+    nowhere = tmp_path / "no" / "f.png"
+
+    def crash(args):
+        raise RuntimeError("first line")
+
+    cases = [
+        (["info", str(bad)], "bad_input", 2, str(bad), 2),
+        (["optimize", str(unreadable)], "bad_input", 2, str(unreadable), None),
+        (["optimize", EXAMPLE, "-o", EXAMPLE], "bad_input", 2, EXAMPLE, None),
+        (["plot", EXAMPLE, "-o", str(nowhere)], "bad_input", 2, str(nowhere), None),
+        (
+            ["plot", EXAMPLE, "-o", str(tmp_path / "f.xyz")],
+            "bad_input",
+            2,
+            str(tmp_path / "f.xyz"),
+            None,
+        ),
+        (
+            ["optimize", EXAMPLE, "-o", str(tmp_path / "g.xyz")],
+            "bad_input",
+            2,
+            str(tmp_path / "g.xyz"),
+            None,
+        ),
+        (["eval", EXAMPLE, EXAMPLE, "--plot", str(folder)], "bad_input", 2, str(folder), None),
+        (["eval", EXAMPLE, str(bad)], "bad_input", 2, str(bad), 2),
+        (["convert", EXAMPLE, str(tmp_path / "poses.tum")], "internal", 3, None, None),
+    ]
+    monkeypatch.setattr(commands, "convert", crash)
+    for args, kind, exit_code, path, line in cases:
+        assert main.main([*args, "--json"]) == exit_code, args
+        captured = capsys.readouterr()
+        document = json.loads(captured.out)
+        jsonschema.validate(document, ERROR)
+        error = document["error"]
+        assert document["command"] == args[0], args
+        assert (error["kind"], error["exit_code"], error["path"], error["line"]) == (
+            kind,
+            exit_code,
+            path,
+            line,
+        ), args
+        assert captured.err == f"posegraph: error: {error['message']}\n", args
+        main.main(args)
+        assert capsys.readouterr().out == "", args  # without --json, nothing on stdout
+
+
+@pytest.mark.parametrize("name, content, line, words", MALFORMED, ids=[m[0] for m in MALFORMED])
+def test_malformed_input_gives_one_line_and_exit_2(tmp_path, name, content, line, words):
+    path = write_case(tmp_path, name, content)
+    completed = run("optimize", path, "-o", tmp_path / "out.g2o", check_exit=2)
+    assert completed.stderr.count("\n") == 1, completed.stderr
+    assert "Traceback" not in completed.stderr and words in completed.stderr
+    assert str(path) in completed.stderr
+    assert not (tmp_path / "out.g2o").exists()
+
+
+@pytest.mark.parametrize("command", ["info", "convert", "plot"])
+@pytest.mark.parametrize("case", [0, 3, 7, 11, 13, 17], ids=lambda k: MALFORMED[k][0])
+def test_malformed_input_for_other_commands(tmp_path, command, case):
+    name, content, _, words = MALFORMED[case]
+    path = write_case(tmp_path, name, content)
+    extra = {"info": [], "convert": [tmp_path / "o.graph"], "plot": ["-o", tmp_path / "o.png"]}[
+        command
+    ]
+    completed = run(command, path, *extra, check_exit=2)
+    assert completed.stderr.count("\n") == 1 and words in completed.stderr
+    assert "Traceback" not in completed.stderr
+
+
+def test_debug_shows_the_traceback(tmp_path):
+    path = write_case(tmp_path, *MALFORMED[0][:2])
+    assert "Traceback" in run("info", path, "--debug", check_exit=2).stderr

@@ -1,0 +1,84 @@
+"""Selected inversion against a dense inverse: on a factor built here from numpy's Cholesky, and
+on CHOLMOD's supernodal factor (relaxed supernodes, explicit zeros) behind covariances."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse
+
+from posegraph.problem.cholesky import available_backends, make_cholesky
+from posegraph.problem.selected_inversion import SupernodalFactor, inverse_blocks, selected_inverse
+
+
+def _sparse_spd(size: int, seed: int) -> np.ndarray:
+    """A dense SPD matrix with a sparse pattern: a chain with random long-range couplings,
+    in 3 × 3 blocks, like a pose graph's information matrix. The chain's even nodes come
+    first, so that its elimination tree branches."""
+    rng = np.random.default_rng(seed)
+    nodes = size // 3
+    place = np.argsort(np.r_[0:nodes:2, 1:nodes:2])
+    pairs = [(place[k], place[k + 1]) for k in range(nodes - 1)]
+    pairs += [tuple(sorted(rng.choice(nodes, 2, replace=False))) for _ in range(nodes // 3)]
+    matrix = np.zeros((size, size))
+    for a, b in pairs:
+        rows = np.r_[3 * a : 3 * a + 3, 3 * b : 3 * b + 3]
+        root = rng.normal(size=(6, 6))
+        matrix[np.ix_(rows, rows)] += root @ root.T
+    return matrix + np.eye(size)
+
+
+def _factor(matrix: np.ndarray) -> SupernodalFactor:
+    """numpy's dense Cholesky factor, kept where it is not zero (the fill pattern)."""
+    lower = scipy.sparse.csc_matrix(np.linalg.cholesky(matrix))
+    lower.sort_indices()
+    return SupernodalFactor(lower.indptr, lower.indices, lower.data)
+
+
+def test_selected_inverse_is_the_inverse_in_the_factors_pattern():
+    matrix = _sparse_spd(90, seed=1)
+    factor = _factor(matrix)
+    assert factor.width.max() > 1 and factor.first.size > 5  # supernodes, and several
+    inverse = np.linalg.inv(matrix)
+    computed = selected_inverse(factor, np.arange(90))
+    for s in range(factor.first.size):
+        columns = np.arange(factor.first[s], factor.first[s] + factor.width[s])
+        expected = inverse[np.ix_(factor.rows(s), columns)]
+        np.testing.assert_allclose(factor.block(computed, s), expected, rtol=1e-10, atol=1e-13)
+
+
+def test_blocks_of_chosen_columns_need_only_their_paths_to_the_root():
+    matrix = _sparse_spd(120, seed=2)
+    factor = _factor(matrix)
+    inverse = np.linalg.inv(matrix)
+    lower = np.linalg.cholesky(matrix)
+    far = np.argwhere(lower != 0)
+    far_row, far_column = far[far[:, 0] - far[:, 1] > 20][0]  # a long-range entry of L
+    for groups in (np.array([[3, 4, 5], [0, 1, 2]]), np.array([[far_column, far_row]]), [[40]]):
+        groups = np.asarray(groups)
+        for group, block in zip(groups, inverse_blocks(factor, groups), strict=True):
+            expected = inverse[np.ix_(group, group)]
+            np.testing.assert_allclose(block, expected, rtol=1e-10, atol=1e-13)
+    assert factor.path_to_root(np.array([0])).size < factor.first.size / 2  # not the whole tree
+    outside = np.argwhere(np.tril(lower) == 0)
+    row, column = outside[outside[:, 0] > outside[:, 1]][0]
+    with pytest.raises(ValueError, match=rf"entry \({row}, {column}\) is outside"):
+        inverse_blocks(factor, np.array([[column, row]]))
+
+
+@pytest.mark.skipif("cholmod" not in available_backends(), reason="cvxopt is not installed")
+def test_cholmod_covariance_blocks_by_selected_inversion_then_factorize_again():
+    """More columns than ``SOLVED_COLUMNS``: CHOLMOD's factor is read out and inverted; the
+    factoriser then factorises and solves another matrix of the pattern as before."""
+    matrix = _sparse_spd(300, seed=3)
+    pattern = scipy.sparse.csc_matrix(matrix)
+    pattern.sort_indices()
+    cholesky = make_cholesky(pattern.indices, pattern.indptr, 300, "cholmod", for_covariance=True)
+    cholesky.factorize(pattern.data)
+    inverse = np.linalg.inv(matrix)
+    groups = np.arange(300).reshape(100, 3)
+    for group, block in zip(groups, cholesky.covariance_blocks(groups), strict=True):
+        np.testing.assert_allclose(block, inverse[np.ix_(group, group)], rtol=1e-9, atol=1e-12)
+    cholesky.factorize(2.0 * pattern.data)
+    rhs = np.arange(300.0)
+    np.testing.assert_allclose(cholesky.solve(rhs), np.linalg.solve(2.0 * matrix, rhs), rtol=1e-9)
