@@ -10,6 +10,7 @@ import re
 from pathlib import Path
 
 import numpy as np
+import pytest
 from posegraph_datasets.outliers import add_false_loops
 
 import posegraph
@@ -165,3 +166,14 @@ def test_the_architecture_page_names_every_subpackage_and_module():
 def test_the_readme_is_a_guide_of_at_most_2500_words():
     words = len(re.findall(r"\S+", (ROOT / "README.md").read_text()))
     assert 500 < words <= 2500
+
+
+def test_every_subpackage_is_installed():
+    """``pip install .`` installs the packages pyproject.toml lists: every folder of the
+    library must be one of them."""
+    tomllib = pytest.importorskip("tomllib", reason="tomllib is in Python 3.11 and later")
+    listed = set(
+        tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"]
+    )
+    folders = {_module_name(path) for path in PACKAGE.rglob("__init__.py")}
+    assert folders <= listed
