@@ -12,7 +12,7 @@ import os
 from collections.abc import Iterator
 
 import posegraph
-from posegraph.io import ReadOptions, ReadResult, read_graph
+from posegraph.io import ReadOptions, ReadResult, load_graph
 from posegraph.io.atomic import check_replaceable
 from posegraph.io.conversion import GRAPH_FORMATS, load_trajectory, output_format, unwritable_to
 from posegraph.io.trajectories import Trajectory
@@ -45,7 +45,7 @@ class Inputs:
         self.skipped_lines: list[dict] = []
 
     def graph(self, path: str) -> ReadResult:
-        read = read_graph(path, self.options)
+        read = load_graph(path, self.options)
         self.skipped_lines += [
             {"path": path, "reason": why, "count": count, "first_line": line}
             for why, count, line in read.skipped_by_reason()

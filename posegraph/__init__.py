@@ -5,7 +5,7 @@ from importlib.metadata import PackageNotFoundError, version
 from .analysis.marginals import marginals, relative_covariances
 from .api import optimize
 from .graph import PoseGraph
-from .io import GraphFileError, ReadOptions, read_graph, write_graph
+from .io import GraphFileError, ReadOptions, load_graph, read_graph, write_graph
 from .lie import SE2, SE3, SO2, SO3, Sim3
 from .robust.spec import RobustSpec
 from .sim3.scale_drift import correct_scale_drift
@@ -31,6 +31,7 @@ __all__ = [
     "Smoother",
     "SolverOptions",
     "correct_scale_drift",
+    "load_graph",
     "marginals",
     "optimize",
     "read_graph",

@@ -28,7 +28,7 @@ from posegraph_datasets.paths import gtsam_data_dir
 from ..api import optimize
 from ..graph import PoseGraph
 from ..init.spanning_tree import spanning_tree_values
-from ..io import read_graph
+from ..io import load_graph
 from ..lie import LieGroup
 from ..robust.run import DECISIONS_AS_START
 from ..smoother import COMPOSED, RESTART, Smoother
@@ -138,7 +138,7 @@ def run(
     seed: int = 0,
     with_gtsam: bool = False,
 ) -> str:
-    full = read_graph(str(path)).graph
+    full = load_graph(str(path)).graph
     false = np.zeros(full.num_edges, dtype=bool)
     if false_loops:
         full, false = add_false_loops(full, false_loops, seed)

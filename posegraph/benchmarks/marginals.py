@@ -23,7 +23,7 @@ from posegraph_datasets.paths import gtsam_data_dir, shared_datasets_dir
 from ..analysis.marginals import marginals, relative_covariances
 from ..api import optimize
 from ..graph import PoseGraph
-from ..io import read_graph
+from ..io import load_graph
 from .timing import at_least, best_time
 
 
@@ -41,7 +41,7 @@ def run(
     random_pair_counts: list[int],
     repeats: int,
 ) -> str:
-    graph = read_graph(str(path)).graph
+    graph = load_graph(str(path)).graph
     optimize(graph)
     lines = [f"{path.name}: covariances, posegraph against gtsam"]
     for count in counts:

@@ -23,7 +23,7 @@ from posegraph_datasets.paths import BENCHMARK_GRAPHS, gtsam_data_dir, shared_da
 
 from ..api import optimize
 from ..graph import PoseGraph
-from ..io import ReadOptions, read_graph
+from ..io import ReadOptions, load_graph
 from ..solvers import SolverOptions, Summary
 from .table import MarkdownTable
 from .timing import add_timing_arguments, best_run, taking_turns
@@ -129,7 +129,7 @@ def run(
     )
     for path in files:
         start = time.perf_counter()
-        graph = read_graph(str(path), GTSAM_GRAPHS.get(path.name, ReadOptions())).graph
+        graph = load_graph(str(path), GTSAM_GRAPHS.get(path.name, ReadOptions())).graph
         read_time = time.perf_counter() - start
         (g_time, g_iters, g_error), (p_time, summary), (d_time, defaults) = side_by_side(
             graph, repeats, rounds, budget, method

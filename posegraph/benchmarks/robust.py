@@ -40,7 +40,7 @@ from posegraph_datasets.paths import gtsam_data_dir, shared_datasets_dir
 from ..api import optimize
 from ..graph import PoseGraph
 from ..init.choice import initialize
-from ..io import read_graph
+from ..io import load_graph
 from ..io.trajectories import Trajectory
 from ..lie import LieGroup
 from ..robust.spec import GNC_QUANTILE, robust_mask
@@ -83,7 +83,7 @@ def ground_truth(name: str) -> PoseGraph | None:
     """Ground-truth poses where they ship (sphere2500), else None."""
     folder = gtsam_data_dir()
     if name == "sphere2500" and folder is not None:
-        return read_graph(str(folder / "sphere2500_groundtruth.txt")).graph
+        return load_graph(str(folder / "sphere2500_groundtruth.txt")).graph
     return None
 
 
@@ -100,7 +100,7 @@ def with_truth(name: str, graph: PoseGraph) -> tuple[str, PoseGraph, LieGroup]:
 
 def cases(name: str) -> list[tuple[str, PoseGraph, Trajectory | None]]:
     """(measurements, graph, ground truth or None) for the benchmark graph ``name``."""
-    graph = read_graph(str(shared_datasets_dir() / f"{name}.g2o")).graph
+    graph = load_graph(str(shared_datasets_dir() / f"{name}.g2o")).graph
     label, measured, truth = with_truth(name, graph)
     own = [] if measured is graph else [("data", graph, None)]
     return own + [(label, measured, Trajectory.of_graph(measured, truth))]
@@ -194,7 +194,7 @@ def run_fixes(
         echo=True,
     )
     for name in names:
-        graph = read_graph(str(shared_datasets_dir() / f"{name}.g2o")).graph
+        graph = load_graph(str(shared_datasets_dir() / f"{name}.g2o")).graph
         _, measured, truth = with_truth(name, graph)
         d, dof = graph.group.point_dim, graph.group.dof
         information = np.diag([4.0] * d + [400.0] * (dof - d))

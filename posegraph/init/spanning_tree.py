@@ -205,3 +205,14 @@ def _tree_edges(
     edge_f, edge_b = order_f[pos_f], order_b[pos_b]
     reversed_ = forward_keys[edge_f] != wanted
     return np.where(reversed_, edge_b, edge_f), reversed_
+
+
+def compose_missing_values(graph: PoseGraph) -> None:
+    """Give the nodes without a value (``PoseGraph.initialized`` false) values composed along a
+    spanning tree from the nodes that have one; where none has, from each component's lowest id,
+    moved onto the priors (``align_to_priors``)."""
+    known = graph.initialized.copy()
+    if known.all():
+        return
+    values = spanning_tree_values(graph, known)
+    graph.set_values(values if known.any() else align_to_priors(graph, values))

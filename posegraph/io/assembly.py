@@ -1,13 +1,12 @@
 """The graph of a file's records: nodes in vertex order, edges and priors to known nodes (the
-others reported), holds and TORO's equivalences; nodes without a vertex line composed along a
-spanning tree."""
+others reported), holds and TORO's equivalences. Nodes without a vertex line have no value
+(``PoseGraph.initialized``): the file gives none."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from ..graph import PoseGraph
-from ..init.spanning_tree import align_to_priors, spanning_tree_values
 from .parsing import LineChecker, Rows
 from .records import ALL_TAGS, Collected
 
@@ -37,9 +36,8 @@ def assemble(group, collected: Collected, checker: LineChecker, skipped_vertices
     """The graph of the lines collected, and the ids of its nodes without a vertex value.
 
     Edges and priors may name nodes without a vertex line only in a file that has none; then
-    every node's value is composed along a spanning tree and aligned to the priors. A node
-    whose vertex line lenient reading skipped (``skipped_vertices``) keeps its edges, and its
-    value is composed from the nodes that have values.
+    no node has a value. A node whose vertex line lenient reading skipped
+    (``skipped_vertices``) keeps its edges and has no value.
     """
     vertex_ids, vertex_lines, values = _vertices(group, collected, checker)
     salvaged = np.setdiff1d(np.fromiter(skipped_vertices, np.int64), vertex_ids)
@@ -79,10 +77,8 @@ def assemble(group, collected: Collected, checker: LineChecker, skipped_vertices
         kept = _filter_known(rows, (0, 1), graph.node_ids, True, checker, skipped_vertices)
         pairs = np.stack([rows.ids(0)[kept], rows.ids(1)[kept]], axis=1)
         graph.equivalences = np.concatenate([graph.equivalences, pairs])
-    if without_vertex.size:
-        known = ~np.isin(graph.node_ids, without_vertex)
-        values = spanning_tree_values(graph, known)
-        graph.set_values(values if known.any() else align_to_priors(graph, values))
+    if without_vertex.size:  # no value read: ``load.load_graph`` composes them
+        graph.initialized = ~np.isin(graph.node_ids, without_vertex)
     return graph, without_vertex
 
 

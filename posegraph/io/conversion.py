@@ -8,10 +8,12 @@ from pathlib import Path
 
 from ..graph import PoseGraph
 from ..lie import LieGroup
-from . import ReadResult, read_graph, unwritable, write_graph
 from .errors import GraphFileError
+from .load import load_graph
 from .parsing import read_lines
+from .reader import ReadResult
 from .trajectories import Trajectory, read_trajectory, write_trajectory
+from .writer import unwritable, write_graph
 
 SUFFIX_FORMATS = {
     ".g2o": "g2o",
@@ -78,7 +80,7 @@ def convert(
     return file_format
 
 
-def load_trajectory(path: str, read: Callable[[str], ReadResult] = read_graph) -> Trajectory:
+def load_trajectory(path: str, read: Callable[[str], ReadResult] = load_graph) -> Trajectory:
     """Poses of any supported file: a trajectory, or the node values, keyed by id, of a graph
     file read by ``read`` (path → ``ReadResult``; its options and its record of what was
     skipped are the caller's)."""

@@ -37,8 +37,8 @@ class ReadResult:
     skipped: list[tuple[int, str]]
     """(line, reason) of every line skipped in lenient mode, in line order."""
     nodes_without_vertex: np.ndarray
-    """Ids of nodes that had no vertex line (or only ones that lenient reading skipped), their
-    values composed along a spanning tree from the nodes that have values."""
+    """Ids of nodes that had no vertex line (or only ones that lenient reading skipped): they
+    have no value (``load_graph`` composes them)."""
     sim3_dialect: str | None
     """"a" (element) or "b" (log of the inverse) for Sim3 files."""
     lifted_scale_information: float | None = None
@@ -83,9 +83,9 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
     Raises ``GraphFileError`` naming ``file:line`` and the problem. The checks run in three
     stages: the tags, each line's numbers, then what lines refer to (a vertex defined again,
     an edge to a node without a vertex line). Strict reading stops at the first stage that
-    finds bad lines and names the earliest of them, with how many it found. Nodes that appear
-    only in edges are created; when the file has no vertex lines at all, every node is
-    initialised by composing odometry along a spanning tree.
+    finds bad lines and names the earliest of them, with how many it found. The graph is what
+    the file says: nodes that appear only in edges are created without a value
+    (``load_graph`` composes them along a spanning tree).
     """
     path = str(path)
     options = ReadOptions() if options is None else options

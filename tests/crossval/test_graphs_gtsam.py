@@ -9,7 +9,7 @@ from posegraph_datasets.paths import BEST_KNOWN_ERROR
 
 import posegraph
 from posegraph.benchmarks.incremental import gtsam_stream, stream
-from posegraph.io import ReadOptions, read_graph
+from posegraph.io import ReadOptions, load_graph, read_graph
 from posegraph.lie import SE2, SE3, Sim3
 from posegraph.problem.factors import linearize_between, linearize_priors
 from posegraph.problem.linear import NormalEquations
@@ -234,7 +234,7 @@ def test_optimum_is_gtsams_or_lower(shared_dataset, name):
 
 @pytest.mark.parametrize("name", ["CSAIL.g2o", "manhattan.g2o"])
 def test_odometry_initialised_graphs_reach_the_best_known_error(shared_dataset, name):
-    result = read_graph(shared_dataset(name))
+    result = load_graph(shared_dataset(name))
     assert result.nodes_without_vertex.size == result.graph.num_nodes
     ours = solve(result.graph).summary.final_error
     assert ours <= BEST_KNOWN_ERROR[name] * (1 + 1e-6)
