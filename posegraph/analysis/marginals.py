@@ -5,7 +5,7 @@ At the estimate X̂, the Gaussian approximation of the posterior has information
 the free nodes' tangents, with right perturbation X = X̂ · Exp(δ) (CONVENTIONS.md). The
 covariance blocks of chosen nodes are blocks of H⁻¹, obtained from one sparse Cholesky
 factorisation (never a dense inverse): by solves with the nodes' unit columns, or with CHOLMOD
-for more than a few nodes (``sparse_cholesky.SOLVED_COLUMNS``), by selected inversion of the
+for more than a few nodes (``problem.cholesky.SOLVED_COLUMNS``), by selected inversion of the
 factor on the paths from those nodes to the root of its elimination tree. A joint covariance
 of up to ``COUPLED_COLUMNS`` columns puts the blocks between its nodes into H's pattern (as
 zeros), so that they lie in the factor's; a larger one comes from solves. Held nodes (the

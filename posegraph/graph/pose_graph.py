@@ -267,8 +267,8 @@ class PoseGraph:
 
     def remove_edges(self, edges) -> None:
         """Remove between edges given by index (negative ones count from the end) or where a
-        boolean mask over the edges holds; indices of later edges shift down. The last
-        solution's weights and rejections stay with the edges that remain (``Solution.without``)."""
+        boolean mask over the edges holds; indices of later edges shift down. A ``Smoother``'s
+        ``remove_edges`` does this and keeps its last solution for the edges that remain."""
         removed = measurement_mask(edges, self.num_edges, "edge", "edges to remove")
         self.edges = self.edges.subset(~removed)
         self.structure_version += 1
@@ -276,7 +276,7 @@ class PoseGraph:
     def remove_priors(self, priors) -> None:
         """Remove priors given by index (negative ones count from the end) or where a boolean
         mask over the priors holds (a GNSS fix found wrong); indices of later priors shift
-        down. The last solution's weights and rejections stay with the priors that remain."""
+        down (``Smoother.remove_priors`` keeps its last solution for those that remain)."""
         removed = measurement_mask(priors, len(self.priors), "prior", "priors to remove")
         self.priors = self.priors.subset(~removed)
         self.structure_version += 1
@@ -290,9 +290,8 @@ class PoseGraph:
 
         A node that joined parts of the graph leaves them apart unless an edge re-links them
         (for a culled keyframe, the composition of the two edges through it, its information
-        from ``lie.uncertainty.compose_covariance``). The next ``posegraph.optimize`` starts
-        from the values that remain, and a robust one from the last run's decisions on the
-        measurements that remain (``Solution.without``)."""
+        from ``lie.uncertainty.compose_covariance``). ``Smoother.remove_nodes`` does this and
+        keeps its last solution, and GNC's decisions, for what remains."""
         removed = np.zeros(self.num_nodes, dtype=bool)
         removed[self.index(node_ids)] = True
         edges = removed[self.edges.i] | removed[self.edges.j]

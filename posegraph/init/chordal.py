@@ -119,9 +119,15 @@ class _Relaxation:
     j: np.ndarray
     held: np.ndarray
     block_of: np.ndarray
+    _patterns: dict = dataclasses.field(default_factory=dict)
 
     def pattern(self, d: int) -> BlockPattern:
-        return BlockPattern(self.block_of, self.i, self.j, np.zeros(0, dtype=np.int64), d)
+        """The block pattern of d × d blocks, analysed once (rotations and translations share
+        it where their blocks are of one size)."""
+        if d not in self._patterns:
+            no_priors = np.zeros(0, dtype=np.int64)
+            self._patterns[d] = BlockPattern(self.block_of, self.i, self.j, no_priors, d)
+        return self._patterns[d]
 
     def kept(self, solved: np.ndarray, start: np.ndarray, weights: np.ndarray) -> np.ndarray:
         """``solved`` (n, …), but ``start`` at the free nodes that no edge weighs (``weights``

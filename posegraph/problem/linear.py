@@ -244,7 +244,7 @@ class BlockPattern:
     def pivot_shares(self, data: np.ndarray) -> np.ndarray:
         """Per column, its pivot in the last factorisation over its entry of ``ridge_scale``
         (of ``data``, the matrix factorised before any ridge): near zero where the columns
-        eliminated before it nearly span it (``sparse_cholesky``)."""
+        eliminated before it nearly span it (``cholesky``)."""
         return self.cholesky.pivots() / self.ridge_scale(data)
 
     def diagonal(self, data: np.ndarray) -> np.ndarray:

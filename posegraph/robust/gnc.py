@@ -141,7 +141,7 @@ def gnc_tls(
     0, nothing is searched: the values stand, and the edges of the mask with s > c² at them are
     rejected, as when the run is stopped.
 
-    ``kept``, decisions known to stand (the edges to keep, ``posegraph.api``), skips the search:
+    ``kept``, decisions known to stand (the edges to keep, ``smoother.warm_start``), skips the search:
     the kept edges are solved for in least squares, and the others are rejected. ``start``,
     decisions that may still hold (an earlier run's, with what was added since kept), replaces
     steps 1–3 if least squares over them settles as it is, and competes with them otherwise
