@@ -107,6 +107,7 @@ def test_main_job_command_runs(workdir):
 
 def test_test_command_is_what_ci_runs():
     ci = (ROOT / ".ci" / "run").read_text()
-    assert "python -m pip install -e '.[test]'" in README and "python -m pytest" in README
-    assert "pip install" in ci and "-e '.[test]'" in ci and "pytest" in ci
+    command = "python -m pip install -e '.[test]' && python -m pytest -n auto"
+    assert command in README
+    assert "pip install" in ci and "-e '.[test]'" in ci and "pytest -q -n auto" in ci
     assert os.access(ROOT / ".ci" / "run", os.X_OK)
