@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import dataclasses
 
+import numpy as np
+
 DEFAULT_INITIAL_DAMPING = 1e-12
 """Levenberg-Marquardt's λ at the start (relative: diagonal damping scales diag(H)). Small,
 because the scale drift of a monocular Sim3 graph is a direction so soft that a larger λ holds
@@ -62,3 +64,16 @@ class SolverOptions:
             raise ValueError("max_iterations must be ≥ 0")
         if self.time_limit is not None and not self.time_limit >= 0:
             raise ValueError(f"time_limit must be ≥ 0 seconds, not {self.time_limit}")
+        for name in ("relative_decrease", "gradient_tolerance", "step_tolerance"):
+            _require_finite_at_least(name, getattr(self, name), 0.0)
+        if self.initial_damping is not None:
+            _require_finite_at_least("initial_damping", self.initial_damping, 0.0)
+        _require_finite_at_least("min_diagonal", self.min_diagonal, 0.0)
+        _require_finite_at_least("max_diagonal", self.max_diagonal, self.min_diagonal)
+
+
+def _require_finite_at_least(name: str, value: float, least: float) -> None:
+    """Refuse a number that is not finite or is below ``least`` (NaN damping would make no
+    step acceptable, and a NaN tolerance no stop reachable), naming the option."""
+    if not (np.isfinite(value) and value >= least):
+        raise ValueError(f"{name} must be a finite number ≥ {least:g}, not {value}")

@@ -279,6 +279,17 @@ def test_invalid_options_are_refused():
         SolverOptions(max_iterations=-1)
     with pytest.raises(ValueError, match="time_limit must be ≥ 0 seconds, not -1"):
         SolverOptions(time_limit=-1)
+    for name, value, least in [
+        ("initial_damping", float("nan"), "0"),
+        ("initial_damping", -1e-3, "0"),
+        ("relative_decrease", float("nan"), "0"),
+        ("gradient_tolerance", float("inf"), "0"),
+        ("step_tolerance", -1.0, "0"),
+        ("min_diagonal", float("nan"), "0"),
+        ("max_diagonal", 1e-9, "1e-06"),
+    ]:
+        with pytest.raises(ValueError, match=f"{name} must be a finite number ≥ {least}, not"):
+            SolverOptions(**{name: value})
 
 
 def test_robust_options_are_checked_before_any_work():
