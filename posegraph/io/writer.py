@@ -19,6 +19,7 @@ from .tags import (
 )
 
 TORO_SUFFIXES = (".graph", ".toro")
+G2O_SUFFIXES = (".g2o",)
 
 
 def number_fields(numbers: np.ndarray) -> list[list[str]]:
@@ -189,10 +190,17 @@ def write_graph(
     g2o_rotation_information: bool = False,
     sim3_dialect: str = "a",
 ) -> None:
-    """Write atomically; the format is "g2o" or "toro", or guessed from the suffix."""
+    """Write atomically; the format is "g2o" or "toro", or told by the suffix (.g2o; .graph or
+    .toro). A path whose suffix tells neither is refused unless the format is given."""
     refuse_non_finite(path, graph.node_ids, graph.values)
     if file_format is None:
-        file_format = "toro" if Path(path).suffix.lower() in TORO_SUFFIXES else "g2o"
+        suffix = Path(path).suffix.lower()
+        if suffix not in TORO_SUFFIXES + G2O_SUFFIXES:
+            raise ValueError(
+                f"{path}: its suffix tells no graph format (.g2o, or .graph or .toro for TORO);"
+                " give file_format 'g2o' or 'toro'"
+            )
+        file_format = "toro" if suffix in TORO_SUFFIXES else "g2o"
     if file_format == "toro":
         text = format_toro(graph)
     elif file_format == "g2o":

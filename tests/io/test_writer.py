@@ -174,3 +174,18 @@ def test_reading_and_writing_leave_the_garbage_collector_as_they_found_it(tmp_pa
         assert gc.isenabled() == enabled
     finally:
         gc.enable()
+
+
+def test_a_graph_file_whose_suffix_tells_no_format_is_refused_unless_it_is_given(tmp_path):
+    """``write_graph("x.xyz")`` wrote g2o silently; the suffix tells the format or the caller
+    gives it, and a refusal writes nothing."""
+    graph = random_graph(SE2, 4, 1, seed=44)
+    unknown = tmp_path / "poses.xyz"
+    with pytest.raises(ValueError, match=r"poses.xyz: its suffix tells no graph format"):
+        write_graph(graph, str(unknown))
+    assert not unknown.exists()
+    write_graph(graph, str(unknown), "toro")
+    assert unknown.read_text().startswith("VERTEX2")
+    for name, first in (("out.G2O", "VERTEX_SE2"), ("out.toro", "VERTEX2")):
+        write_graph(graph, str(tmp_path / name))
+        assert (tmp_path / name).read_text().startswith(first)
