@@ -13,15 +13,9 @@ from .load import load_graph
 from .parsing import read_lines
 from .reader import ReadResult
 from .trajectories import Trajectory, read_trajectory, write_trajectory
-from .writer import unwritable, write_graph
+from .writer import GRAPH_SUFFIXES, unwritable, write_graph
 
-SUFFIX_FORMATS = {
-    ".g2o": "g2o",
-    ".graph": "toro",
-    ".toro": "toro",
-    ".tum": "tum",
-    ".kitti": "kitti",
-}
+SUFFIX_FORMATS = {**GRAPH_SUFFIXES, ".tum": "tum", ".kitti": "kitti"}
 GRAPH_FORMATS = ("g2o", "toro")
 TRAJECTORY_FORMATS = ("tum", "kitti")
 

@@ -18,8 +18,8 @@ from .tags import (
     toro2_information_to_file,
 )
 
-TORO_SUFFIXES = (".graph", ".toro")
-G2O_SUFFIXES = (".g2o",)
+GRAPH_SUFFIXES = {".g2o": "g2o", ".graph": "toro", ".toro": "toro"}
+"""The graph format each file suffix names."""
 
 
 def number_fields(numbers: np.ndarray) -> list[list[str]]:
@@ -194,13 +194,12 @@ def write_graph(
     .toro). A path whose suffix tells neither is refused unless the format is given."""
     refuse_non_finite(path, graph.node_ids, graph.values)
     if file_format is None:
-        suffix = Path(path).suffix.lower()
-        if suffix not in TORO_SUFFIXES + G2O_SUFFIXES:
+        file_format = GRAPH_SUFFIXES.get(Path(path).suffix.lower())
+        if file_format is None:
             raise ValueError(
                 f"{path}: its suffix tells no graph format (.g2o, or .graph or .toro for TORO);"
                 " give file_format 'g2o' or 'toro'"
             )
-        file_format = "toro" if suffix in TORO_SUFFIXES else "g2o"
     if file_format == "toro":
         text = format_toro(graph)
     elif file_format == "g2o":

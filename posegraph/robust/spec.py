@@ -59,11 +59,8 @@ class RobustSpec:
                 raise ValueError(
                     f"a robust kernel's width must be positive and finite, not {width_text}"
                 )
-        if isinstance(edges, str) and edges not in ROBUST_EDGE_CLASSES:
-            raise ValueError(
-                f"robust edges are {' or '.join(ROBUST_EDGE_CLASSES)}, a boolean mask or edge "
-                f"indices, not {edges!r}"
-            )
+        if isinstance(edges, str):
+            _check_edge_class(edges)
         return cls(name, width, edges, bool(priors))
 
     @property
@@ -89,15 +86,17 @@ def robust_mask(graph: PoseGraph, edges: str | np.ndarray) -> np.ndarray:
     their indices (negative ones count from the end). The edges outside it are trusted (gtsam's
     GNC calls them known inliers)."""
     if isinstance(edges, str):
-        if edges == "loops":
-            return ~odometry_mask(graph)
-        if edges == "all":
-            return np.ones(graph.num_edges, dtype=bool)
+        _check_edge_class(edges)
+        return ~odometry_mask(graph) if edges == "loops" else np.ones(graph.num_edges, dtype=bool)
+    return measurement_mask(edges, graph.num_edges, "edge", "robust edges")
+
+
+def _check_edge_class(edges: str) -> None:
+    if edges not in ROBUST_EDGE_CLASSES:
         raise ValueError(
             f"robust edges are {' or '.join(ROBUST_EDGE_CLASSES)}, a boolean mask or edge "
             f"indices, not {edges!r}"
         )
-    return measurement_mask(edges, graph.num_edges, "edge", "robust edges")
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
