@@ -4,11 +4,24 @@ others reported), holds and TORO's equivalences. Nodes without a vertex line hav
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from ..graph import PoseGraph
+from ..lie import SE3
 from .parsing import LineChecker, Rows
 from .records import ALL_TAGS, Collected
+
+
+@dataclasses.dataclass(frozen=True)
+class SE3Lines:
+    """Which edges and priors of a Sim3 graph were read from SE3 lines (a file mixing SE3
+    odometry and Sim3 loops): masks over ``graph.edges`` and ``graph.priors``. Such lines are
+    read at scale 1 with no information on log-scale (``records.embed_se3_records``)."""
+
+    edges: np.ndarray
+    priors: np.ndarray
 
 
 def skipped_vertex_lines(lines_by_tag: dict[str, list], checker: LineChecker) -> dict[int, int]:
@@ -33,7 +46,8 @@ def skipped_vertex_lines(lines_by_tag: dict[str, list], checker: LineChecker) ->
 
 
 def assemble(group, collected: Collected, checker: LineChecker, skipped_vertices: dict):
-    """The graph of the lines collected, and the ids of its nodes without a vertex value.
+    """The graph of the lines collected, the ids of its nodes without a vertex value, and the
+    masks of its edges and of its priors read from SE3 lines (``SE3Lines``).
 
     Edges and priors may name nodes without a vertex line only in a file that has none; then
     no node has a value. A node whose vertex line lenient reading skipped
@@ -43,14 +57,16 @@ def assemble(group, collected: Collected, checker: LineChecker, skipped_vertices
     salvaged = np.setdiff1d(np.fromiter(skipped_vertices, np.int64), vertex_ids)
     known_ids = np.concatenate([vertex_ids, salvaged])
     check = bool(collected.vertices)
-    edges = []
+    edges, edges_from_se3 = [], []
     for rows, measurements, information in collected.edges:
         kept = _filter_known(rows, (0, 1), known_ids, check, checker, skipped_vertices)
         edges.append((rows.ids(0)[kept], rows.ids(1)[kept], measurements[kept], information[kept]))
-    priors = []
+        edges_from_se3.append(np.full(np.count_nonzero(kept), ALL_TAGS[rows.tag].group is SE3))
+    priors, priors_from_se3 = [], []
     for rows, measurements, information in collected.priors:
         kept = _filter_known(rows, (0,), known_ids, check, checker, skipped_vertices)
         priors.append((rows.ids(0)[kept], measurements[kept], information[kept]))
+        priors_from_se3.append(np.full(np.count_nonzero(kept), ALL_TAGS[rows.tag].group is SE3))
 
     endpoints = [e[0] for e in edges] + [e[1] for e in edges] + [p[0] for p in priors]
     without_vertex = np.unique(np.concatenate(endpoints)) if endpoints else np.zeros(0, np.int64)
@@ -79,7 +95,13 @@ def assemble(group, collected: Collected, checker: LineChecker, skipped_vertices
         graph.equivalences = np.concatenate([graph.equivalences, pairs])
     if without_vertex.size:  # no value read: ``load.load_graph`` composes them
         graph.initialized = ~np.isin(graph.node_ids, without_vertex)
-    return graph, without_vertex
+    se3_lines = None
+    if group is not SE3 and any(mask.any() for mask in edges_from_se3 + priors_from_se3):
+        se3_lines = SE3Lines(
+            np.concatenate(edges_from_se3 + [np.zeros(0, bool)]),
+            np.concatenate(priors_from_se3 + [np.zeros(0, bool)]),
+        )
+    return graph, without_vertex, se3_lines
 
 
 def _vertices(group, collected: Collected, checker: LineChecker):

@@ -31,8 +31,9 @@ class ReadOptions:
     identity_information: bool = False
     edge2_order: str = "toro"
     scale_information: float | None = None
-    """For files mixing SE3 and Sim3 lines (monocular odometry plus Sim3 loop closures): the SE3
-    lines are lifted to Sim3 with scale 1 and this information on log-scale (None:
+    """For files mixing SE3 and Sim3 lines (monocular odometry plus Sim3 loop closures):
+    ``load_graph`` lifts the SE3 lines to Sim3 with scale 1 and this information on log-scale
+    (``read_graph`` leaves it out: the file gives none) (None:
     ``posegraph.sim3.lifting.default_scale_information`` of the SE3 edges and of the scale change per
     edge that the Sim3 edges call for, ``posegraph.sim3.lifting.loop_scale_sigma``)."""
 

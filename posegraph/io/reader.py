@@ -9,7 +9,7 @@ import numpy as np
 
 from ..graph import PoseGraph
 from ..lie import SE3, Sim3
-from .assembly import assemble, skipped_vertex_lines
+from .assembly import SE3Lines, assemble, skipped_vertex_lines
 from .errors import GraphFileError
 from .options import ReadOptions
 from .parsing import LineChecker, Rows, paused_garbage_collection, read_tagged_lines, to_rows
@@ -18,7 +18,7 @@ from .records import (
     Collected,
     apply_prior_offsets,
     convert_rows,
-    lift_se3_records,
+    embed_se3_records,
     pad_missing_information,
 )
 from .tags import LANDMARK_TAGS, TORO_TAGS
@@ -41,10 +41,13 @@ class ReadResult:
     have no value (``load_graph`` composes them)."""
     sim3_dialect: str | None
     """"a" (element) or "b" (log of the inverse) for Sim3 files."""
+    se3_lines: SE3Lines | None = None
+    """In a file mixing SE3 and Sim3 lines, which edges and priors were SE3 lines: read at
+    scale 1 with no information on log-scale (``load_graph`` lifts them); None otherwise."""
     lifted_scale_information: float | None = None
-    """In a file mixing SE3 and Sim3 lines, the information on log-scale that the SE3 edges and
-    priors were lifted to Sim3 with (``ReadOptions.scale_information``, or its default); None
-    if none were lifted."""
+    """The information on log-scale that ``load_graph`` gave the SE3 lines of a file mixing
+    SE3 and Sim3 (``ReadOptions.scale_information``, or its default); None if none were
+    lifted."""
 
     def skipped_by_reason(self) -> list[tuple[str, int, int]]:
         """(reason, how many lines, the first one's number) of the skipped lines, most frequent
@@ -84,8 +87,9 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
     stages: the tags, each line's numbers, then what lines refer to (a vertex defined again,
     an edge to a node without a vertex line). Strict reading stops at the first stage that
     finds bad lines and names the earliest of them, with how many it found. The graph is what
-    the file says: nodes that appear only in edges are created without a value
-    (``load_graph`` composes them along a spanning tree).
+    the file says: nodes that appear only in edges are created without a value, and the SE3
+    lines of a file mixing SE3 and Sim3 are Sim3 ones of scale 1 with no information on
+    log-scale (``load_graph`` composes the values and lifts those lines).
     """
     path = str(path)
     options = ReadOptions() if options is None else options
@@ -112,11 +116,10 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
     ]
     if group is Sim3 and not sim3_rows:
         group = SE3  # every Sim3 line was skipped (lenient): the SE3 lines are the graph
-    lifted_scale_information = None
     if group is Sim3:
-        lifted_scale_information = lift_se3_records(collected, options.scale_information)
+        embed_se3_records(collected)
     skipped_vertices = skipped_vertex_lines(lines_by_tag, checker)
-    graph, without_vertex = assemble(group, collected, checker, skipped_vertices)
+    graph, without_vertex, se3_lines = assemble(group, collected, checker, skipped_vertices)
     checker.raise_first()
     read = ReadResult(
         graph,
@@ -126,7 +129,7 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
         sorted(checker.skipped),
         without_vertex,
         _sim3_dialect(sim3_rows),
-        lifted_scale_information,
+        se3_lines,
     )
     if graph.num_nodes == 0:  # lenient reading skipped every vertex and edge line
         raise GraphFileError(

@@ -1,6 +1,6 @@
 """The records of a file's lines: each tag's rows checked and converted (group elements,
-information matrices), priors' offsets applied, and SE3 records lifted to Sim3 in a file that
-mixes both."""
+information matrices), priors' offsets applied, and SE3 records embedded in Sim3 in a file
+that mixes both."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import dataclasses
 import numpy as np
 
 from ..graph import element_problems, information_problems, overflowing_edges
-from ..lie import SE3, Sim3
-from ..sim3.lifting import default_scale_information, lift_information, lift_se3, loop_scale_sigma
+from ..lie import SE3
+from ..sim3.lifting import lift_information, lift_se3
 from .options import ReadOptions
 from .parsing import LineChecker, Rows, quaternion_problems
 from .tags import (
@@ -24,7 +24,6 @@ from .tags import (
 )
 
 ALL_TAGS: dict[str, TagFormat] = {**G2O_TAGS, **TORO_TAGS}
-_NO_ENDS = np.zeros((0, 2), np.int64)
 
 
 @dataclasses.dataclass
@@ -39,24 +38,12 @@ class Collected:
     equivalences: list = dataclasses.field(default_factory=list)  # rows
 
 
-def lift_se3_records(collected: Collected, scale_information: float | None) -> float | None:
-    """Turn SE3 vertices, edges and priors into Sim3 ones of scale 1 (CONVENTIONS.md: both
-    files' vertices are world-from-node, so no inversion is involved); returns the log-scale
-    information of the lifted edges and priors, None if there were none."""
-    se3_edges = [(rows, z, info) for rows, z, info in collected.edges if isinstance(z, SE3)]
-    lifted = bool(se3_edges) or any(isinstance(z, SE3) for _, z, _ in collected.priors)
-    if scale_information is None:
-        loops = [(rows, z) for rows, z, _ in collected.edges if isinstance(z, Sim3)]
-        sigma = loop_scale_sigma(
-            np.concatenate([rows.node_ids[:, :2] for rows, _, _ in se3_edges] + [_NO_ENDS]),
-            np.concatenate([rows.node_ids[:, :2] for rows, _ in loops] + [_NO_ENDS]),
-            np.concatenate([z.scale for _, z in loops] + [np.zeros(0)]),
-        )
-        scale_information = default_scale_information(
-            np.concatenate([info for *_, info in se3_edges] + [np.zeros((0, 6, 6))]),
-            SE3.concatenate([z for _, z, _ in se3_edges] + [SE3.identity((0,))]),
-            sigma,
-        )
+def embed_se3_records(collected: Collected) -> None:
+    """Turn SE3 vertices, edges and priors into Sim3 ones of scale 1 whose information says
+    nothing of log-scale (a zero σ row and column): what an SE3 line of a file mixing SE3 and
+    Sim3 states. CONVENTIONS.md: both files' vertices are world-from-node, so no inversion is
+    involved. How much such a line constrains scale is the lifting step's choice
+    (``sim3.lifting.lift_se3_lines``), not the reader's."""
     collected.vertices = [
         (rows, lift_se3(values) if isinstance(values, SE3) else values)
         for rows, values in collected.vertices
@@ -66,13 +53,12 @@ def lift_se3_records(collected: Collected, scale_information: float | None) -> f
             collected,
             kind,
             [
-                (rows, lift_se3(z), lift_information(info, scale_information))
+                (rows, lift_se3(z), lift_information(info, 0.0))
                 if isinstance(z, SE3)
                 else (rows, z, info)
                 for rows, z, info in getattr(collected, kind)
             ],
         )
-    return scale_information if lifted else None
 
 
 def _edge2_order_advice(rows: Rows, order: str) -> str:

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import scipy.sparse
 import scipy.sparse.csgraph
 
+from ..graph import PoseGraph
 from ..lie import SE3, Sim3
 
 
@@ -108,3 +111,31 @@ def loop_scale_sigma(
         return None
     variance = float(np.median(log_scale[usable][joined] ** 2 / hops[joined] ** 1.5))
     return float(np.sqrt(variance)) if variance > 0 else None
+
+
+def lift_se3_lines(
+    graph: PoseGraph, edges: np.ndarray, priors: np.ndarray, scale_information: float | None
+) -> float:
+    """Give the edges and priors of a Sim3 graph that were SE3 lines (masks ``edges`` and
+    ``priors``; read at scale 1 with no log-scale information) the log-scale information
+    ``scale_information``, or if None ``default_scale_information`` of those edges and of the
+    change per edge that the other (Sim3) edges call for (``loop_scale_sigma``); returns it."""
+    check_scale_information(scale_information)
+    lifted = graph.edges.subset(edges)
+    if scale_information is None:
+        ids, loops = graph.node_ids, graph.edges.subset(~edges)
+        sigma = loop_scale_sigma(
+            np.stack([ids[lifted.i], ids[lifted.j]], axis=1),
+            np.stack([ids[loops.i], ids[loops.j]], axis=1),
+            loops.measurements.scale,
+        )
+        odometry = lifted.measurements
+        scale_information = default_scale_information(
+            lifted.information[:, :6, :6], SE3(odometry.rotation, odometry.translation), sigma
+        )
+    for kind, mask in (("edges", edges), ("priors", priors)):
+        information = getattr(graph, kind).information.copy()
+        information[mask, 6, 6] = scale_information
+        setattr(graph, kind, dataclasses.replace(getattr(graph, kind), information=information))
+    graph.structure_version += 1
+    return scale_information

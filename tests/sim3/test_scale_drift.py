@@ -205,7 +205,7 @@ def test_the_default_lift_allows_the_scale_change_the_loops_call_for(tmp_path):
         )
         path = tmp_path / f"mono_{drift}.g2o"
         write_sequence(sequence, str(path), str(tmp_path / "gt.tum"))
-        assert posegraph.read_graph(str(path)).lifted_scale_information == pytest.approx(
+        assert posegraph.load_graph(str(path)).lifted_scale_information == pytest.approx(
             expected, rel=1e-12
         )
         assert default_scale_information(
@@ -242,7 +242,7 @@ def test_false_loops_are_heard_by_the_default_lift_as_in_a_file(tmp_path):
     path = tmp_path / "false_loops.g2o"
     path.write_text(format_g2o(sequence.odometry) + "\n".join(lines) + "\n")
     lifted = edges.information[:odometry, 6, 6]
-    assert posegraph.read_graph(str(path)).lifted_scale_information == pytest.approx(
+    assert posegraph.load_graph(str(path)).lifted_scale_information == pytest.approx(
         lifted[0], rel=1e-12
     )
     assert np.all(lifted == lifted[0]) and lifted[0] != added.edges.information[0, 6, 6]
@@ -276,11 +276,21 @@ def test_mixed_g2o_files_read_as_one_sim3_graph(tmp_path, dialect):
     sequence = monocular_sequence(num_poses=150, seed=5)
     path, truth = tmp_path / "mono.g2o", tmp_path / "gt.tum"
     write_sequence(sequence, str(path), str(truth), dialect=dialect)
-    read = posegraph.read_graph(str(path), ReadOptions(scale_information=50.0))
+    read = posegraph.load_graph(str(path), ReadOptions(scale_information=50.0))
     assert read.lifted_scale_information == 50.0
-    assert posegraph.read_graph(str(path)).lifted_scale_information == pytest.approx(
+    assert posegraph.load_graph(str(path)).lifted_scale_information == pytest.approx(
         sequence.sim3_graph().edges.information[0, 6, 6], rel=1e-9
     )
+    # The reader returns what the file says: the SE3 lines at scale 1, no log-scale information.
+    raw = posegraph.read_graph(str(path), ReadOptions(scale_information=50.0))
+    assert raw.lifted_scale_information is None
+    odometry = raw.se3_lines.edges
+    assert odometry.sum() == 149 and not raw.se3_lines.priors.size
+    np.testing.assert_array_equal(raw.graph.edges.information[odometry, 6, 6], 0.0)
+    np.testing.assert_array_equal(
+        raw.graph.edges.information[~odometry], read.graph.edges.information[~odometry]
+    )
+    np.testing.assert_array_equal(raw.graph.edges.measurements.scale[odometry], 1.0)
     assert read.tag_counts == {
         "VERTEX_SE3:QUAT": 150,
         "EDGE_SE3:QUAT": 149,
@@ -299,7 +309,7 @@ def test_mixed_g2o_files_read_as_one_sim3_graph(tmp_path, dialect):
         out = tmp_path / f"out_{out_dialect}.g2o"
         posegraph.write_graph(graph, str(out), sim3_dialect=out_dialect)
         again_read = posegraph.read_graph(str(out))
-        assert again_read.lifted_scale_information is None  # Sim3 lines only: nothing lifted
+        assert again_read.se3_lines is None  # Sim3 lines only: nothing to lift
         again = again_read.graph
         np.testing.assert_allclose(again.values.as_matrix(), graph.values.as_matrix(), atol=1e-10)
         np.testing.assert_allclose(
