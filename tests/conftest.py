@@ -104,17 +104,18 @@ def cull(smoother: posegraph.Smoother, node_id: int) -> None:
     smoother.remove_nodes([node_id])
 
 
-SCALE_STEP = Sim3.exp(np.array([0, 0, 0, 0, 0, 0, 200.0]))
-"""A Sim3 measurement that multiplies the scale by e^200."""
+SCALE_STEP = Sim3.exp(np.array([0, 0, 0, 0, 0, 0, 100.0]))
+"""A Sim3 measurement that multiplies the scale by e^100, the largest scale an element may
+have (``posegraph.graph.checks.LOG_DETERMINANT_LIMIT``)."""
 
 
 def sim3_scale_chain(with_values: bool = True) -> PoseGraph:
-    """Nodes 0–5 joined by edges i → i+1 of ``SCALE_STEP``: composed from node 0, node 4 lies
-    at scale e^800 and node 5 at e^1000, beyond double precision (which ends near e^709).
+    """Nodes 0–10 joined by edges i → i+1 of ``SCALE_STEP``: composed from node 0, node 8 lies
+    at scale e^800 and node 10 at e^1000, beyond double precision (which ends near e^709).
     ``with_values``: every node at the identity; else none has a value."""
     graph = PoseGraph(Sim3)
-    graph.add_nodes(np.arange(6), Sim3.identity((6,)) if with_values else None)
-    graph.add_edges(np.arange(5), np.arange(1, 6), SCALE_STEP, np.eye(7))
+    graph.add_nodes(np.arange(11), Sim3.identity((11,)) if with_values else None)
+    graph.add_edges(np.arange(10), np.arange(1, 11), SCALE_STEP, np.eye(7))
     return graph
 
 

@@ -126,7 +126,7 @@ def _composed(graph: PoseGraph, known: LieGroup | None) -> LieGroup:
     count = 1 if known is None else len(known)
     scratch = graph.copy()
     if known is not None:
-        scratch.set_values(graph.values.set_at(np.arange(count), known))
+        scratch.set_values(graph.values.set_at(np.arange(count), known), check=False)
     return spanning_tree_values(scratch, np.arange(graph.num_nodes) < count)
 
 

@@ -40,22 +40,34 @@ def named_nodes(node_ids: np.ndarray, shown: int = 3) -> str:
     return f"nodes {named}" + (f", … ({len(node_ids)} nodes)" if len(node_ids) > shown else "")
 
 
+LOG_DETERMINANT_LIMIT = 300.0
+"""Largest |log det| of an element's linear block: a Sim3 scale within e^±100. Beyond it,
+products of a few elements and the logarithm's series overflow or lose every digit (a scale
+of e^355 makes ``Sim3.log`` return NaN); no trajectory's scale comes near."""
+
+
 def element_problems(matrices: np.ndarray) -> tuple[np.ndarray, Callable[[int], str]]:
     """Which of (n, m, m) matrices cannot be group elements, and what the k-th has: a last
-    entry other than 1 (by more than 1e-4), or a linear block of determinant ≤ 0 (or NaN, for
-    a matrix that is not finite, which callers refuse first). A Sim3 of scale 1e-110 has
-    determinant 1e-330, which underflows to 0, and is refused; one of scale e^300 has
-    determinant +∞ and is accepted."""
+    entry other than 1 (by more than 1e-4), or a linear block whose determinant is not
+    positive, or whose logarithm is beyond ±``LOG_DETERMINANT_LIMIT`` (NaN, for a matrix that
+    is not finite, which callers refuse first)."""
     corner = matrices[:, -1, -1]
-    with np.errstate(over="ignore", under="ignore"):
+    with np.errstate(all="ignore"):
         determinant = np.linalg.det(matrices[:, :-1, :-1])
+        log_determinant = np.log(determinant)
     unit_corner = np.abs(corner - 1) <= 1e-4
-    bad = ~unit_corner | ~(determinant > 0)
+    positive = determinant > 0
+    bad = ~unit_corner | ~positive | ~(np.abs(log_determinant) <= LOG_DETERMINANT_LIMIT)
 
     def why(k: int) -> str:
-        if unit_corner[k]:
+        if not unit_corner[k]:
+            return f"a last entry of {corner[k]:.3g}, not 1"
+        if not positive[k]:
             return f"determinant {determinant[k]:.3g}"
-        return f"a last entry of {corner[k]:.3g}, not 1"
+        return (
+            f"determinant {determinant[k]:.3g}, beyond e^±{LOG_DETERMINANT_LIMIT:g}: a scale"
+            " out of range"
+        )
 
     return bad, why
 
@@ -98,6 +110,20 @@ def overflowing_edges(measurements: LieGroup, information: np.ndarray) -> np.nda
     information), so no cost or normal equations can hold them."""
     with np.errstate(over="ignore", invalid="ignore"):
         return ~np.isfinite(start_information(measurements, information)).all(axis=(1, 2))
+
+
+def refuse_overflowing(i_ids: np.ndarray, j_ids: np.ndarray, new, kind: str) -> None:
+    """Refuse measurements (an ``EdgeSet`` of ``kind`` "edge" or "prior", on nodes ``i_ids``
+    and ``j_ids``) whose translation weighed by their information overflows
+    (``overflowing_edges``)."""
+    overflowing = np.flatnonzero(overflowing_edges(new.measurements, new.information))
+    if overflowing.size:
+        i, j = i_ids[overflowing[0]], j_ids[overflowing[0]]
+        which = f"the edge {i} → {j}" if kind == "edge" else f"the prior on node {i}"
+        raise ValueError(
+            f"{which}: its translation weighed by its information overflows "
+            f"(Ad(Z⁻¹)ᵀ Ω Ad(Z⁻¹) at node {i}); it is too large for double precision"
+        )
 
 
 def information_ranks(information: np.ndarray) -> np.ndarray:

@@ -18,7 +18,7 @@ from collections.abc import Callable, Iterable
 import numpy as np
 
 from ..lie import SE2, SE3, LieGroup, Sim3
-from .checks import as_elements, as_information, node_id_array, overflowing_edges
+from .checks import as_elements, as_information, node_id_array, refuse_overflowing
 from .edges import EdgeSet, measurement_mask, renumbered
 
 POSE_GROUPS: tuple[type[LieGroup], ...] = (SE2, SE3, Sim3)
@@ -199,13 +199,7 @@ class PoseGraph:
         new = self._edge_set(i_ids, j_ids, measurements, information)
         if np.any(new.i == new.j):
             raise ValueError(f"self-loop on node {self.node_ids[new.i[new.i == new.j][0]]}")
-        overflowing = np.flatnonzero(overflowing_edges(new.measurements, new.information))
-        if overflowing.size:
-            i, j = self.node_ids[new.i[overflowing[0]]], self.node_ids[new.j[overflowing[0]]]
-            raise ValueError(
-                f"the edge {i} → {j}: its translation weighed by its information overflows "
-                f"(Ad(Z⁻¹)ᵀ Ω Ad(Z⁻¹) at node {i}); it is too large for double precision"
-            )
+        refuse_overflowing(self.node_ids[new.i], self.node_ids[new.j], new, "edge")
         start = self.num_edges
         self._stacks["edges"].append(new)
         self.structure_version += 1
@@ -218,6 +212,7 @@ class PoseGraph:
     def add_priors(self, node_ids, measurements, information) -> np.ndarray:
         """Add priors Z ≈ Xᵢ; returns their prior indices."""
         new = self._edge_set(node_ids, None, measurements, information)
+        refuse_overflowing(self.node_ids[new.i], self.node_ids[new.j], new, "prior")
         start = self._stacks["priors"].length
         self._stacks["priors"].append(new)
         self.structure_version += 1
@@ -315,10 +310,17 @@ class PoseGraph:
             missing = self.node_ids[~self.initialized][:5].tolist()
             raise ValueError(f"nodes {missing} have no values; {remedy}")
 
-    def set_values(self, values: LieGroup) -> None:
-        """Replace all node values (batch shape (num_nodes,)); every node then has a value."""
-        if values.batch_shape != (self.num_nodes,):
+    def set_values(self, values: LieGroup | np.ndarray, check: bool = True) -> None:
+        """Replace all node values (elements or matrices, batch shape (num_nodes,)); every
+        node then has a value. They are checked as ``add_nodes`` checks them (finite, on the
+        group); ``check=False`` is for values the library computed itself."""
+        if isinstance(values, LieGroup) and values.batch_shape != (self.num_nodes,):
             raise ValueError(f"expected {self.num_nodes} values, got {values.batch_shape}")
+        if check:
+            ids = self.node_ids
+            values = as_elements(
+                self.group, values, self.num_nodes, lambda k: f"the value of node {ids[k]}"
+            )
         self.values = values
         self.initialized = np.ones(self.num_nodes, dtype=bool)
 

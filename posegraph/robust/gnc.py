@@ -109,7 +109,7 @@ def _stages(graph, mask, width_sq, options, start: Result, restart: bool, run: R
         if active is None or not np.array_equal(now_active, active):
             active = now_active
             system = NormalEquations(work, work.gauge_nodes(), options.linear_solver)
-        work.set_values(initialize(work, "chordal") if restart else result.values)
+        work.set_values(initialize(work, "chordal") if restart else result.values, check=False)
         label = f"gnc round {rounds} ({'chordal' if restart else 'warm'})"
         result = run.solve(work, stage_options, label, system=system)
         s = between_squares(result.values, graph.edges)
@@ -161,7 +161,7 @@ def gnc_tls(
         elif kept is None:
             kept, searched, from_start = _search(graph, mask, width_sq, search, run, start)
             work = graph.with_edges(kept)
-            work.set_values(searched.values)
+            work.set_values(searched.values, check=False)
             result = run.solve(work, options, "final")
         else:
             result = run.solve(graph.with_edges(kept), options, "carried decisions")
@@ -217,7 +217,7 @@ def _settle_decisions(graph, mask, kept, width_sq, options, run: Run):
     values = graph.values
     for solves in range(DECISION_SOLVES):
         work = graph.with_edges(kept)
-        work.set_values(values)
+        work.set_values(values, check=False)
         result = run.solve(work, options, "previous decisions")
         consistent = ~mask | (between_squares(result.values, graph.edges) <= width_sq)
         if np.array_equal(consistent, kept):

@@ -83,7 +83,7 @@ def _readmit(graph, mask, kept, result, objective, width_sq, options, leverage, 
         with_candidates = kept.copy()
         with_candidates[candidates] = True
         work = graph.with_edges(with_candidates)
-        work.set_values(values)
+        work.set_values(values, check=False)
         values = run.solve(work, options, "re-admit").values
         position = np.cumsum(with_candidates) - 1  # of each edge in ``work``
         squares = deleted_residuals(
@@ -133,7 +133,7 @@ def _drop(graph, mask, kept, result, objective, width_sq, options, leverage, run
         without = kept.copy()
         without[edge] = False
         work = graph.with_edges(without)
-        work.set_values(result.values)
+        work.set_values(result.values, check=False)
         trial = run.solve(work, options, "drop")
         trial_objective = tls_objective(graph, trial.values, mask, width_sq)
         if trial_objective < objective:

@@ -121,10 +121,10 @@ def settle(graph, mask, kept, values, width_sq, options, run: Run, restart: bool
     for settle_pass in range(MAX_CONSISTENCY_PASSES):
         work = graph.with_edges(kept)
         if settle_pass == 0 and restart and supports_chordal(graph.group):
-            work.set_values(initialize(work, "chordal"))
+            work.set_values(initialize(work, "chordal"), check=False)
             result = run.solve(work, run.options, "consistency (chordal)")
         else:
-            work.set_values(values)
+            work.set_values(values, check=False)
             result = run.solve(work, options, "consistency")
         values = result.values
         consistent = ~mask | (between_squares(values, graph.edges) <= width_sq)

@@ -110,7 +110,7 @@ class Smoother:
             and not (summary.termination in (STOPPED, TIME_LIMIT) or options.max_iterations == 0)
         )
         graph = self.graph
-        graph.set_values(result.values)
+        graph.set_values(result.values, check=False)
         self.solution = Solution(
             graph.edges,
             graph.priors,
@@ -134,7 +134,7 @@ class Smoother:
         else:
             if init == "auto":
                 init = "odometry" if kernel is not None else choose(graph)
-            graph.set_values(initialize(graph, init))
+            graph.set_values(initialize(graph, init), check=False)
         return _Start(init)
 
     def _warm_start(self, kernel: Kernel | None, options: SolverOptions) -> _Start:

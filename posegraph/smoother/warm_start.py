@@ -47,7 +47,7 @@ def warm_start(
     if not graph.initialized.all():
         _initialize_new_nodes(graph, options)
     if least_squares and choose(graph) == "chordal" and not _agree_with_solution(graph, solution):
-        graph.set_values(initialize(graph, "chordal"))
+        graph.set_values(initialize(graph, "chordal"), check=False)
         return RESTART
     return "warm start"
 
@@ -192,8 +192,8 @@ def compose_new_nodes(graph: PoseGraph, new: np.ndarray) -> tuple[PoseGraph, np.
     solved = ~new[involved]
     local.fixed = solved
     local.priors = local.priors.subset(~solved[local.priors.i])
-    local.set_values(align_to_priors(local, spanning_tree_values(local, known=solved)))
-    graph.set_values(graph.values.set_at(np.flatnonzero(new), local.values[~solved]))
+    local.set_values(align_to_priors(local, spanning_tree_values(local, known=solved)), check=False)
+    graph.set_values(graph.values.set_at(np.flatnonzero(new), local.values[~solved]), check=False)
     return local, ~solved
 
 
@@ -209,4 +209,6 @@ def _initialize_new_nodes(graph: PoseGraph, options: SolverOptions) -> None:
         max_iterations=min(options.max_iterations, LOCAL_MAX_ITERATIONS),
     )
     refined = solve(local, local_options)
-    graph.set_values(graph.values.set_at(np.flatnonzero(new), refined.values[local_new]))
+    graph.set_values(
+        graph.values.set_at(np.flatnonzero(new), refined.values[local_new]), check=False
+    )

@@ -149,6 +149,26 @@ def test_values_and_measurements_are_checked_where_they_are_given():
         PoseGraph("se3")
 
 
+def test_set_values_checks_values_as_add_nodes_does():
+    """``set_values`` took NaN or non-orthogonal values that ``add_nodes`` refuses, and
+    ``optimize(init="file")`` then returned NaN without raising."""
+    graph = random_graph(SE3, 5, 2, seed=12)
+    before = graph.values
+    nan = graph.values.set_at(2, SE3(np.eye(3), np.array([np.nan, 0.0, 0.0])))
+    skewed = graph.values.set_at(4, SE3(np.diag([1.0, 1.0, 1.5]), np.zeros(3)))
+    for values, message in [
+        (nan, "the value of node 14 is not finite"),
+        (skewed, "the value of node 18 is not an element of SE3"),
+        (np.full((5, 4, 4), np.inf), "the value of node 10 is not finite"),
+    ]:
+        with pytest.raises(ValueError, match=message):
+            graph.set_values(values)
+        assert graph.values is before
+    graph.set_values(before.as_matrix() + 1e-9)  # matrices, rounding drift projected away
+    result = posegraph.optimize(graph, init="file")
+    assert np.isfinite(result.summary.final_error)
+
+
 def test_elements_are_checked_like_matrices_but_kept_as_given():
     """A group element built from bad parts (a Sim3 of scale 0 or −1, a reflection, a sheared
     rotation) is refused as its matrix would be; one within 1e-4 of the group is kept bit for

@@ -107,15 +107,15 @@ def test_initialisers_accept_full_information_and_several_components(group, meth
 
 @pytest.mark.parametrize("method", ["odometry", "spanning-tree", "chordal"])
 def test_an_initialisation_beyond_double_precision_is_refused_naming_the_nodes(method):
-    """``sim3_scale_chain`` composes to e^800 at node 4 and e^1000 at node 5 (the loop 0 → 2
+    """``sim3_scale_chain`` composes to e^800 at node 8 and e^1000 at node 10 (the loop 1 → 0
     agrees with the chain): no double holds them. Chordal relaxation composes Sim3 translations
     along the tree as the others do, so it names the same nodes (solving for every translation
     at once, it lost all but node 0's)."""
     graph = sim3_scale_chain(with_values=False)
-    graph.add_edge(0, 2, SCALE_STEP @ SCALE_STEP, np.eye(7))
+    graph.add_edge(1, 0, SCALE_STEP.inverse(), np.eye(7))
     message = (
         rf"the {method} initialisation composes the measurements to values beyond double"
-        r" precision at nodes 4, 5: a translation or scale too large to hold"
+        r" precision at nodes 8, 9, 10: a translation or scale too large to hold"
     )
     with warnings.catch_warnings():
         warnings.simplefilter("error")

@@ -230,7 +230,7 @@ def test_non_finite_steps_are_rejected(monkeypatch):
 
 
 def test_steps_that_overflow_are_rejected_silently():
-    """From the identity, the Gauss-Newton step lands at e^800 and e^1000 (``sim3_scale_chain``):
+    """From the identity, the Gauss-Newton step lands at e^800 to e^1000 (``sim3_scale_chain``):
     GN stops, saying why; LM damps its steps and ends on values that double precision holds.
     Neither lets numpy's warnings through. LM's records of the rejected steps say so with a
     Python bool, which ``--json`` can write (a numpy bool was an internal error there)."""
