@@ -5,13 +5,17 @@ others reported), holds and TORO's equivalences. Nodes without a vertex line hav
 from __future__ import annotations
 
 import dataclasses
+import re
 
 import numpy as np
 
 from ..graph import PoseGraph
 from ..lie import SE3
+from ..problem.factors import between_squares, prior_squares
 from .parsing import LineChecker, Rows
 from .records import ALL_TAGS, Collected
+
+_ASCII_BLANKS = re.compile(r"[ \t\r\v\f]+")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -26,7 +30,7 @@ class SE3Lines:
 
 def skipped_vertex_lines(lines_by_tag: dict[str, list], checker: LineChecker) -> dict[int, int]:
     """Node id → number of its first vertex line that lenient reading skipped (ids that are
-    not integers from 0 to 2⁶³ − 1 left out)."""
+    not ASCII integers from 0 to 2⁶³ − 1 left out)."""
     if not checker.skipped:
         return {}
     skipped = {line for line, _ in checker.skipped}
@@ -36,13 +40,58 @@ def skipped_vertex_lines(lines_by_tag: dict[str, list], checker: LineChecker) ->
             continue
         for number, text in entries:
             if number in skipped:
-                try:
-                    node = int(text.split(None, 1)[0])
-                except (ValueError, IndexError):
+                token = _ASCII_BLANKS.split(text.strip(" \t\r\v\f"), maxsplit=1)[0]
+                if not (token.isascii() and token.isdigit()):  # int() reads "1_0" and "٣"
                     continue
-                if 0 <= node < 2**63:
+                node = int(token)
+                if node < 2**63:
                     found.setdefault(node, number)
     return found
+
+
+@dataclasses.dataclass
+class _Measured:
+    """Edges or priors to add, per record (node ids…, measurements, information), and per
+    measurement its line, its tag and whether it was an SE3 line."""
+
+    parts: list = dataclasses.field(default_factory=list)
+    lines: list = dataclasses.field(default_factory=lambda: [np.zeros(0, np.int64)])
+    tags: list = dataclasses.field(default_factory=list)
+    from_se3: list = dataclasses.field(default_factory=lambda: [np.zeros(0, bool)])
+
+
+def _known(records: list, columns, known_ids, check: bool, checker, skipped_vertices) -> _Measured:
+    """The records' measurements whose nodes are known (``_filter_known``)."""
+    measured = _Measured()
+    for rows, measurements, information in records:
+        kept = _filter_known(rows, columns, known_ids, check, checker, skipped_vertices)
+        ids = [rows.ids(column)[kept] for column in columns]
+        measured.parts.append((*ids, measurements[kept], information[kept]))
+        measured.lines.append(rows.line_numbers[kept])
+        measured.tags += [rows.tag] * int(np.count_nonzero(kept))
+        measured.from_se3.append(np.full(np.count_nonzero(kept), ALL_TAGS[rows.tag].group is SE3))
+    return measured
+
+
+def _finite_errors(graph: PoseGraph, edges: _Measured, priors: _Measured, checker) -> tuple:
+    """Masks of the edges and of the priors whose error at the file's values is finite, or
+    whose nodes have no value; the others are reported on their lines (values so far apart
+    that their error overflows, as a vertex at 1e200 makes it)."""
+    has_value = graph.initialized
+    with np.errstate(all="ignore"):
+        edge_errors = between_squares(graph.values, graph.edges)
+        prior_errors = prior_squares(graph.values, graph.priors)
+    edges_kept = np.isfinite(edge_errors) | ~(has_value[graph.edges.i] & has_value[graph.edges.j])
+    priors_kept = np.isfinite(prior_errors) | ~has_value[graph.priors.i]
+    for kept, measured in ((edges_kept, edges), (priors_kept, priors)):
+        lines = np.concatenate(measured.lines)
+        for k in np.flatnonzero(~kept):
+            checker.fail(
+                int(lines[k]),
+                f"{measured.tags[k]}: its error at the file's values overflows: a number is out"
+                " of range (a value too large for double precision)",
+            )
+    return edges_kept, priors_kept
 
 
 def assemble(group, collected: Collected, checker: LineChecker, skipped_vertices: dict):
@@ -51,24 +100,17 @@ def assemble(group, collected: Collected, checker: LineChecker, skipped_vertices
 
     Edges and priors may name nodes without a vertex line only in a file that has none; then
     no node has a value. A node whose vertex line lenient reading skipped
-    (``skipped_vertices``) keeps its edges and has no value.
+    (``skipped_vertices``) keeps its edges and has no value. Edges and priors whose error at
+    the file's values overflows are reported (``_finite_errors``).
     """
     vertex_ids, vertex_lines, values = _vertices(group, collected, checker)
     salvaged = np.setdiff1d(np.fromiter(skipped_vertices, np.int64), vertex_ids)
     known_ids = np.concatenate([vertex_ids, salvaged])
     check = bool(collected.vertices)
-    edges, edges_from_se3 = [], []
-    for rows, measurements, information in collected.edges:
-        kept = _filter_known(rows, (0, 1), known_ids, check, checker, skipped_vertices)
-        edges.append((rows.ids(0)[kept], rows.ids(1)[kept], measurements[kept], information[kept]))
-        edges_from_se3.append(np.full(np.count_nonzero(kept), ALL_TAGS[rows.tag].group is SE3))
-    priors, priors_from_se3 = [], []
-    for rows, measurements, information in collected.priors:
-        kept = _filter_known(rows, (0,), known_ids, check, checker, skipped_vertices)
-        priors.append((rows.ids(0)[kept], measurements[kept], information[kept]))
-        priors_from_se3.append(np.full(np.count_nonzero(kept), ALL_TAGS[rows.tag].group is SE3))
+    edges = _known(collected.edges, (0, 1), known_ids, check, checker, skipped_vertices)
+    priors = _known(collected.priors, (0,), known_ids, check, checker, skipped_vertices)
 
-    endpoints = [e[0] for e in edges] + [e[1] for e in edges] + [p[0] for p in priors]
+    endpoints = [part[k] for part in edges.parts for k in (0, 1)] + [p[0] for p in priors.parts]
     without_vertex = np.unique(np.concatenate(endpoints)) if endpoints else np.zeros(0, np.int64)
     if check:
         without_vertex = without_vertex[np.isin(without_vertex, salvaged)]
@@ -82,10 +124,25 @@ def assemble(group, collected: Collected, checker: LineChecker, skipped_vertices
     graph.add_nodes(
         node_ids, group.concatenate([values, group.identity(without_vertex.shape)])[order]
     )
-    for i, j, measurements, information in edges:
-        graph.add_edges(i, j, measurements, information)
-    for i, measurements, information in priors:
-        graph.add_priors(i, measurements, information)
+    for part in edges.parts:
+        graph.add_edges(*part)
+    for part in priors.parts:
+        graph.add_priors(*part)
+    graph.initialized = ~np.isin(graph.node_ids, without_vertex)  # ``load_graph`` composes
+    edges_kept, priors_kept = _finite_errors(graph, edges, priors, checker)
+    graph.remove_edges(~edges_kept)
+    graph.remove_priors(~priors_kept)
+    _add_holds(graph, collected, checker, skipped_vertices)
+    se3_edges = np.concatenate(edges.from_se3)[edges_kept]
+    se3_priors = np.concatenate(priors.from_se3)[priors_kept]
+    se3_lines = None
+    if group is not SE3 and (se3_edges.any() or se3_priors.any()):
+        se3_lines = SE3Lines(se3_edges, se3_priors)
+    return graph, without_vertex, se3_lines
+
+
+def _add_holds(graph: PoseGraph, collected: Collected, checker, skipped_vertices: dict) -> None:
+    """The FIX lines' holds and TORO's equivalences, on known nodes."""
     for rows in collected.fixes:
         kept = _filter_known(rows, (0,), graph.node_ids, True, checker, skipped_vertices)
         graph.fix(rows.ids(0)[kept])
@@ -93,15 +150,6 @@ def assemble(group, collected: Collected, checker: LineChecker, skipped_vertices
         kept = _filter_known(rows, (0, 1), graph.node_ids, True, checker, skipped_vertices)
         pairs = np.stack([rows.ids(0)[kept], rows.ids(1)[kept]], axis=1)
         graph.equivalences = np.concatenate([graph.equivalences, pairs])
-    if without_vertex.size:  # no value read: ``load.load_graph`` composes them
-        graph.initialized = ~np.isin(graph.node_ids, without_vertex)
-    se3_lines = None
-    if group is not SE3 and any(mask.any() for mask in edges_from_se3 + priors_from_se3):
-        se3_lines = SE3Lines(
-            np.concatenate(edges_from_se3 + [np.zeros(0, bool)]),
-            np.concatenate(priors_from_se3 + [np.zeros(0, bool)]),
-        )
-    return graph, without_vertex, se3_lines
 
 
 def _vertices(group, collected: Collected, checker: LineChecker):

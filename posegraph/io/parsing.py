@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import gc
+import re
 import warnings
 from collections.abc import Iterator
 from pathlib import Path
@@ -91,7 +92,8 @@ def paused_garbage_collection() -> Iterator[None]:
 
 def _code_lines(path: str) -> Iterator[tuple[int, str]]:
     """(line number, text before any ``#``) of every line that is not blank or a comment.
-    UTF-8, with or without a byte-order mark."""
+    UTF-8, with or without a byte-order mark. Lines end at ``\n`` alone, as g2o, gtsam and
+    editors count them (a form feed or U+2028 inside a line or a comment does not end it)."""
     try:
         text = Path(path).read_text(encoding="utf-8-sig")
     except FileNotFoundError:
@@ -102,7 +104,7 @@ def _code_lines(path: str) -> Iterator[tuple[int, str]]:
         raise GraphFileError(path, None, "is not a text file") from None
     except OSError as error:
         raise GraphFileError(path, None, f"cannot be read ({error.strerror})") from None
-    for number, line in enumerate(text.splitlines(), start=1):
+    for number, line in enumerate(text.split("\n"), start=1):
         code = line.partition("#")[0]
         if code and not code.isspace():
             yield number, code
@@ -111,8 +113,18 @@ def _code_lines(path: str) -> Iterator[tuple[int, str]]:
 @paused_garbage_collection()
 def read_lines(path: str) -> list[tuple[int, list[str]]]:
     """(line number, tokens) of every line that is not blank or a comment: ``#`` starts a
-    comment, at the start of a line or after its numbers."""
-    return [(number, code.split()) for number, code in _code_lines(path)]
+    comment, at the start of a line or after its numbers. A line of numbers holding a
+    character outside the formats' syntax (``_OUTSIDE_SYNTAX``) is refused, naming it; a line
+    that starts with a tag is left to the graph reader."""
+    lines = []
+    for number, code in _code_lines(path):
+        tokens = code.split()
+        if not tokens[0][:1].isalpha() and not _all_in_syntax(code):
+            checker = LineChecker(path, lenient=False)
+            _in_syntax("", [(number, code)], checker)
+            checker.raise_first()
+        lines.append((number, tokens))
+    return lines
 
 
 @paused_garbage_collection()
@@ -144,6 +156,7 @@ def to_rows(
     """
     numbers = _uniform_numbers(entries, widths, len(id_columns))
     if numbers is None:
+        entries = _in_syntax(tag, entries, checker)
         tokenized = [(number, text.split()) for number, text in entries]
         return _rows_from_tokens(tag, tokenized, widths, id_columns, checker, without_information)
     line_numbers = np.fromiter((number for number, _ in entries), np.int64, len(entries))
@@ -151,17 +164,52 @@ def to_rows(
     return _checked(Rows(tag, line_numbers, numbers, ids), id_columns, checker)
 
 
+_OUTSIDE_SYNTAX = re.compile(r"[^\x21-\x7e \t\r\v\f]|_")
+"""A character that no number of the formats holds: outside printable ASCII and its blanks
+(Python's ``float`` would take ``1_0`` as 10 and Arabic-Indic or full-width digits as digits,
+and ``str.split`` would split at U+00A0; g2o and gtsam read ASCII)."""
+
+
+_SYNTAX_BYTES = bytes(range(0x21, 0x7F)) + b" \t\r\v\f"
+
+
+def _all_in_syntax(text: str) -> bool:
+    """Whether ``text`` holds no character outside the formats' syntax (``_OUTSIDE_SYNTAX``),
+    in three passes of C code rather than a regular expression's one of Python speed."""
+    return (
+        text.isascii()
+        and "_" not in text
+        and not text.encode("ascii").translate(None, _SYNTAX_BYTES)
+    )
+
+
+def _in_syntax(tag: str, entries: list[tuple[int, str]], checker: LineChecker) -> list:
+    """The lines (line number, text after the tag) whose characters are all of the formats'
+    ASCII syntax; the others are refused, naming the first character outside it."""
+    kept = []
+    for number, text in entries:
+        outside = _OUTSIDE_SYNTAX.search(text)
+        if outside is None:
+            kept.append((number, text))
+            continue
+        character = outside.group()
+        checker.fail(
+            number,
+            f"{tag}{': ' if tag else ''}{character!r} (U+{ord(character):04X}) is outside the"
+            " ASCII syntax of numbers",
+        )
+    return kept
+
+
 def _uniform_numbers(
     entries: list[tuple[int, str]], widths: tuple[int, ...], id_count: int
 ) -> np.ndarray | None:
     """Every line's numbers as one (n, w) array, parsed by numpy's C reader in one call, if
     every line parses as w numbers, w is one of ``widths`` and the ids are below 2⁵³ (exact
-    as floats). None otherwise, and the lines are then tokenised and checked one by one. The
-    C reader accepts a subset of what ``float`` accepts (not "1_0" or "٣"), so a file reads
-    the same either way. Against tokenising every line, reading a 25 MB SE3 file (30 numbers
-    a line) took 1.13 s instead of 1.41 s and peaked at 296 MB instead of 458 MB."""
-    if not widths:
-        return None
+    as floats). None otherwise, and the lines are then tokenised and checked one by one (as
+    they are when a character outside the formats' ASCII syntax is found)."""
+    if not widths or not _all_in_syntax(" ".join(text for _, text in entries)):
+        return None  # numpy's reader splits at U+00A0, say
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # "input contained no data"
         try:

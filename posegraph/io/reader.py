@@ -95,7 +95,7 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
     options = ReadOptions() if options is None else options
     checker = LineChecker(path, options.lenient)
     lines_by_tag = _lines_by_tag(path, options, checker)
-    group = _group_of(path, lines_by_tag)
+    group = _group_of(path, lines_by_tag, checker)
     collected = Collected()
     for tag, entries in lines_by_tag.items():
         spec = ALL_TAGS[tag]
@@ -153,30 +153,46 @@ def _lines_by_tag(path: str, options: ReadOptions, checker: LineChecker) -> dict
     return lines_by_tag
 
 
-def _group_of(path: str, lines_by_tag: dict[str, list]):
-    """The one group of the file's lines (Sim3 for SE3 odometry with Sim3 loop closures); a
-    file that mixes others, or holds no vertex or edge lines, is refused."""
-    first_line_of_group: dict = {}
+def _family(group):
+    """SE3 and Sim3 lines make one graph (SE3 odometry with Sim3 loop closures)."""
+    return SE3 if group is Sim3 else group
+
+
+def _group_of(path: str, lines_by_tag: dict[str, list], checker: LineChecker):
+    """The one group of the file's lines: Sim3 for SE3 odometry with Sim3 loop closures. A
+    file that mixes others is refused, naming the first line of a group that is not the most
+    frequent; lenient
+    reading keeps the group of most lines and skips the others' lines (taken out of
+    ``lines_by_tag``). A file of no vertex or edge lines is refused."""
+    first_line: dict = {}
+    count: Counter = Counter()
     for tag, entries in lines_by_tag.items():
-        group = ALL_TAGS[tag].group
-        if group is not None:
-            first_line_of_group[group] = min(
-                first_line_of_group.get(group, entries[0][0]), entries[0][0]
-            )
-    groups = set(first_line_of_group)
-    if groups == {SE3, Sim3}:  # SE3 odometry with Sim3 loop closures: one Sim3 graph
-        groups = {Sim3}
-    if len(groups) > 1:
-        in_order = sorted(groups, key=first_line_of_group.get)
-        names = " and ".join(g.__name__ for g in in_order)
-        raise GraphFileError(
-            path, first_line_of_group[in_order[1]], f"mixes {names} lines in one graph"
-        )
-    if not groups:
+        family = _family(ALL_TAGS[tag].group)
+        if family is not None:
+            first_line[family] = min(first_line.get(family, entries[0][0]), entries[0][0])
+            count[family] += len(entries)
+    if not first_line:
         first = min(entries[0][0] for entries in lines_by_tag.values())
         tags = " and ".join(sorted(lines_by_tag))
         raise GraphFileError(path, first, f"holds no vertices or edges, only {tags} lines")
-    return groups.pop()
+    in_order = sorted(first_line, key=first_line.get)
+    kept = max(in_order, key=count.get)  # the first of the most frequent
+    if len(in_order) > 1 and not checker.lenient:
+        other = next(family for family in in_order if family is not kept)
+        raise GraphFileError(
+            path,
+            first_line[other],
+            f"mixes {other.__name__} and {kept.__name__} lines in one graph: a"
+            f" {other.__name__} line among {count[kept]} {kept.__name__} lines (--lenient skips"
+            " the lines of the other groups)",
+        )
+    for tag in list(lines_by_tag):
+        family = _family(ALL_TAGS[tag].group)
+        if family is not None and family is not kept:
+            for number, _ in lines_by_tag.pop(tag):
+                checker.fail(number, f"{tag}: a {family.__name__} line in a {kept.__name__} graph")
+    groups = {ALL_TAGS[tag].group for tag in lines_by_tag} - {None}
+    return Sim3 if Sim3 in groups else kept
 
 
 def _tag_counts(collected: Collected) -> dict[str, int]:

@@ -98,15 +98,16 @@ def _check_information(rows: Rows, measurements, information, checker: LineCheck
 
 
 def _check_overflow(rows: Rows, measurements, information, checker: LineChecker):
-    """The edges whose information at their start node is finite (``overflowing_edges``)."""
+    """The edges (or priors) whose information at their start node is finite
+    (``overflowing_edges``)."""
     return _drop(
         rows,
         measurements,
         information,
         overflowing_edges(measurements, information),
         lambda k: (
-            "a number is out of range: the edge's translation weighed by its information "
-            f"overflows (Ad(Z⁻¹)ᵀ Ω Ad(Z⁻¹) at node {rows.ids(0)[k]})"
+            f"a number is out of range: the {ALL_TAGS[rows.tag].kind}'s translation weighed by"
+            f" its information overflows (Ad(Z⁻¹)ᵀ Ω Ad(Z⁻¹) at node {rows.ids(0)[k]})"
         ),
         checker,
     )
@@ -183,8 +184,7 @@ def convert_rows(spec: TagFormat, rows: Rows, options: ReadOptions, checker, col
         if options.identity_information:
             information = np.broadcast_to(np.eye(spec.group.dof), information.shape).copy()
         converted = _check_information(rows, measurements, information, checker, options)
-        if spec.kind == "edge":
-            converted = _check_overflow(*converted, checker)
+        converted = _check_overflow(*converted, checker)
         if len(converted[0]):
             (collected.edges if spec.kind == "edge" else collected.priors).append(converted)
     elif spec.kind == "parameter":

@@ -16,7 +16,7 @@ from ..lie import SE2, SE3, LieGroup, Sim3
 from .atomic import atomic_write_text
 from .errors import GraphFileError
 from .parsing import paused_garbage_collection, quaternion_problems, read_lines
-from .writer import number_fields, refuse_non_finite
+from .writer import number_fields, refuse_non_finite, written_finite
 
 if TYPE_CHECKING:
     from ..graph import PoseGraph
@@ -24,7 +24,8 @@ if TYPE_CHECKING:
 
 @dataclasses.dataclass(frozen=True)
 class Trajectory:
-    """Stamped poses: ``keys`` (N,) and ``poses`` (SE3, batch (N,))."""
+    """Stamped poses: ``keys`` (N,) and ``poses`` (SE3, batch (N,)). Keys are time stamps
+    (float) or a graph's node ids (int64, exact beyond 2⁵³)."""
 
     keys: np.ndarray
     poses: SE3
@@ -33,7 +34,7 @@ class Trajectory:
     def of_graph(cls, graph: PoseGraph, values: LieGroup | None = None) -> Trajectory:
         """A graph's poses (``values``, by default its own) keyed by node id, as SE3
         (``as_se3``)."""
-        return cls(graph.node_ids.astype(float), as_se3(graph.values if values is None else values))
+        return cls(graph.node_ids.copy(), as_se3(graph.values if values is None else values))
 
     @property
     def positions(self) -> np.ndarray:
@@ -74,9 +75,19 @@ def format_kitti(trajectory: Trajectory) -> str:
 
 
 def write_trajectory(trajectory: Trajectory, path: str, file_format: str) -> None:
-    """Write "tum" or "kitti" atomically."""
+    """Write "tum" or "kitti" atomically. Integer keys (node ids) that a TUM time stamp, a
+    double, cannot hold exactly (some beyond 2⁵³) are refused."""
     refuse_non_finite(path, trajectory.keys, trajectory.poses)
-    text = {"tum": format_tum, "kitti": format_kitti}[file_format](trajectory)
+    keys = trajectory.keys
+    if file_format == "tum" and keys.dtype.kind in "iu":
+        inexact = [key for key in keys[np.abs(keys) > 2**53].tolist() if int(float(key)) != key]
+        if inexact:
+            raise ValueError(
+                f"{path}: node id {inexact[0]} is beyond 2⁵³, where a TUM time stamp (a double)"
+                " cannot hold it exactly; write a graph file (g2o) instead"
+            )
+    with written_finite(path):
+        text = {"tum": format_tum, "kitti": format_kitti}[file_format](trajectory)
     atomic_write_text(path, text)
 
 
@@ -104,6 +115,29 @@ def _numbers(path: str, lines: list, width: int, name: str) -> np.ndarray:
     return np.array(rows)
 
 
+ROTATION_TOLERANCE = 1e-3
+"""Largest |R Rᵀ − I| entry of a KITTI line's 3 × 3 block read as a rotation (the files hold
+about six digits); the block is then projected to the nearest rotation."""
+
+
+def _refuse_non_rotations(path: str, lines: list, rotation: np.ndarray) -> None:
+    """Raise naming the first KITTI line whose 3 × 3 block is not a rotation: not orthogonal,
+    or a reflection (determinant −1), which a projection would silently turn into a rotation."""
+    with np.errstate(all="ignore"):
+        error = np.abs(rotation @ np.swapaxes(rotation, 1, 2) - np.eye(3)).max(axis=(1, 2))
+        determinant = np.linalg.det(rotation)
+    bad = ~(error <= ROTATION_TOLERANCE) | ~(determinant > 0)
+    if not bad.any():
+        return
+    k = int(np.flatnonzero(bad)[0])
+    why = (
+        f"is a reflection (determinant {determinant[k]:.3g}), not a rotation"
+        if error[k] <= ROTATION_TOLERANCE
+        else f"is not a rotation matrix (|R Rᵀ − I| reaches {error[k]:.3g})"
+    )
+    raise GraphFileError(path, lines[k][0], f"the 3 × 3 block {why}")
+
+
 def read_trajectory(path: str, file_format: str) -> Trajectory:
     """Read "tum" or "kitti"; errors name ``file:line``."""
     lines = read_lines(path)
@@ -121,8 +155,7 @@ def read_trajectory(path: str, file_format: str) -> Trajectory:
         )
     matrices = numbers.reshape(-1, 3, 4)
     rotation = matrices[:, :, :3]
-    if np.abs(rotation @ np.swapaxes(rotation, 1, 2) - np.eye(3)).max() > 1e-3:
-        raise GraphFileError(path, None, "a 3 × 3 block is not a rotation matrix")
+    _refuse_non_rotations(path, lines, rotation)
     return Trajectory(
         np.arange(len(numbers), dtype=float), SE3(rotation, matrices[:, :, 3]).normalize()
     )

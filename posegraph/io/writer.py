@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -22,9 +24,34 @@ GRAPH_SUFFIXES = {".g2o": "g2o", ".graph": "toro", ".toro": "toro"}
 """The graph format each file suffix names."""
 
 
+class NonFiniteNumber(ValueError):
+    """A number to be written is NaN or infinite; no reader accepts it, ours included."""
+
+
 def number_fields(numbers: np.ndarray) -> list[list[str]]:
-    """The text of each row's numbers: repr, which round-trips exactly, with −0.0 as 0.0."""
-    return [[repr(x) for x in row] for row in (np.asarray(numbers, float) + 0.0).tolist()]
+    """The text of each row's numbers: repr, which round-trips exactly, with −0.0 as 0.0.
+    Raises ``NonFiniteNumber`` if one is NaN or infinite: every writer formats through here,
+    so what it checks is what would be written."""
+    numbers = np.asarray(numbers, float)
+    finite = np.isfinite(numbers).all(axis=tuple(range(1, numbers.ndim)))
+    if not finite.all():
+        row = int(np.flatnonzero(~finite)[0])
+        raise NonFiniteNumber(
+            f"{np.count_nonzero(~finite)} line(s) would hold NaN or ∞ (the first: line {row + 1}"
+            " of its kind)"
+        )
+    return [[repr(x) for x in row] for row in (numbers + 0.0).tolist()]
+
+
+@contextlib.contextmanager
+def written_finite(path: str) -> Iterator[None]:
+    """Report a ``NonFiniteNumber`` met while formatting the text of ``path`` as not written
+    (numpy's overflow warnings are silenced: the check finds what overflowed)."""
+    try:
+        with np.errstate(all="ignore"):
+            yield
+    except NonFiniteNumber as error:
+        raise ValueError(f"{path}: not written: {error}") from None
 
 
 def refuse_non_finite(path: str, keys: np.ndarray, values: LieGroup) -> None:
@@ -200,10 +227,11 @@ def write_graph(
                 f"{path}: its suffix tells no graph format (.g2o, or .graph or .toro for TORO);"
                 " give file_format 'g2o' or 'toro'"
             )
-    if file_format == "toro":
-        text = format_toro(graph)
-    elif file_format == "g2o":
-        text = format_g2o(graph, g2o_rotation_information, sim3_dialect)
-    else:
+    if file_format not in ("g2o", "toro"):
         raise ValueError(f"unknown graph format {file_format!r}; use 'g2o' or 'toro'")
+    with written_finite(path):
+        if file_format == "toro":
+            text = format_toro(graph)
+        else:
+            text = format_g2o(graph, g2o_rotation_information, sim3_dialect)
     atomic_write_text(path, text)

@@ -110,7 +110,7 @@ MALFORMED = [
     ("fractional-id", "VERTEX_SE2 1.5 0 0 0\n", 1, "node ids must be whole numbers"),
     ("negative-id", "VERTEX_SE2 -3 0 0 0\n", 1, "node ids must be whole numbers"),
     ("id-beyond-int64", "VERTEX_SE2 9223372036854775808 0 0 0\n", 1, "from 0 to 2⁶³ − 1"),
-    ("mixed-groups", V0 + SE3_V1, 2, "mixes SE2 and SE3 lines"),
+    ("mixed-groups", V0 + SE3_V1, 2, "mixes SE3 and SE2 lines"),
     ("self-loop", V0 + f"EDGE_SE2 0 0 1 0 0 {INFO2}\n", 2, "edge from node 0 to itself"),
     ("fix-unknown-node", V0 + V1 + "FIX 9\n", 3, "refers to node 9"),
     (

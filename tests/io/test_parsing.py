@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from posegraph.io import read_graph, write_graph
+from posegraph.io import GraphFileError, ReadOptions, read_graph, write_graph
 from posegraph.io.parsing import (
     LineChecker,
     _rows_from_tokens,
@@ -15,6 +15,7 @@ from posegraph.io.parsing import (
     to_rows,
 )
 from posegraph.io.records import ALL_TAGS
+from posegraph.io.trajectories import read_trajectory
 from posegraph.lie import SE2
 from tests.io.helpers import assert_same_graph
 
@@ -109,16 +110,15 @@ def test_whole_tag_parsing_reads_what_line_by_line_parsing_reads(gtsam_dataset, 
 
 
 def test_unusual_numbers_read_the_same_both_ways(tmp_path):
-    """Tabs, runs of spaces, a no-break space, exponents, signs, infinities, a comment after the
-    numbers, ids near 2⁵³ (still exact), an id of 2⁵³ + 1 (parsed exactly, line by line), and
-    tokens that Python's ``float`` reads but numpy's C reader does not ("1_0", Arabic-Indic
-    digits): the whole-tag reading declines those, and both ways agree on every line."""
+    """Tabs, runs of spaces, a form feed between numbers (a blank to g2o's streams too),
+    exponents, signs, infinities, a comment after the numbers, ids near 2⁵³ (still exact), and
+    an id of 2⁵³ + 1 (parsed exactly, line by line): both ways agree on every line."""
     path = tmp_path / "unusual.g2o"
     path.write_text(
         "VERTEX_SE2\t0\t1e-3  -2.5E+2 +.5\n"
-        "VERTEX_SE2 9007199254740991 1\u00a02 3 # comment\n"
+        "VERTEX_SE2 9007199254740991 1\f2 3 # comment\n"
         "VERTEX_SE2 2 -0 0.0 inf\n"
-        "VERTEX_SE3:QUAT 7 1_0 ٣ 0 0 0 0 1\n"
+        "VERTEX_SE3:QUAT 7 10 3 0 0 0 0 1\n"
         "VERTEX_SE3:QUAT 9007199254740993 0 0 0 0 0 0 1\n"
         "VERTEX_SE3:QUAT 8 -1e308 1e-320 0 0 0 0 1\n"
     )
@@ -133,3 +133,54 @@ def test_unusual_numbers_read_the_same_both_ways(tmp_path):
     se3 = parsed["VERTEX_SE3:QUAT"][0]
     assert se3.node_ids[:, 0].tolist() == [7, 2**53 + 1, 8]
     assert se3.numbers[0, 1:3].tolist() == [10.0, 3.0]
+
+
+@pytest.mark.parametrize(
+    "number, character",
+    [("1_0", "_"), ("\u0663", "\u0663"), ("\uff13", "\uff13"), ("1\u00a02", "\u00a0")],
+)
+@pytest.mark.parametrize("where", ["value", "id"])
+def test_numbers_outside_the_ascii_syntax_are_refused(tmp_path, number, character, where):
+    """Python's ``float`` reads "1_0" as 10 and Arabic-Indic or full-width digits as digits,
+    and numpy's reader splits at a no-break space; g2o and gtsam read ASCII. Such a line is
+    refused naming it and the character, in values and node ids alike, in graph and
+    trajectory files."""
+    line = f"VERTEX_SE2 {number} 0 0 0" if where == "id" else f"VERTEX_SE2 1 {number} 0 0"
+    if where == "id" and character == "\u00a0":
+        line = "VERTEX_SE2 1\u00a02 0 0 0"
+    path = tmp_path / "odd.g2o"
+    path.write_text(f"VERTEX_SE2 0 0 0 0\n{line}\nEDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\n")
+    with pytest.raises(GraphFileError) as raised:
+        read_graph(str(path))
+    assert raised.value.line == 2
+    assert f"{character!r} (U+{ord(character):04X}) is outside the ASCII syntax" in str(
+        raised.value
+    )
+    lenient = read_graph(str(path), ReadOptions(lenient=True))
+    # Without its id, node 1 has no vertex line: the edge to it is skipped too.
+    assert [line for line, _ in lenient.skipped] == ([2] if where == "value" else [2, 3])
+    tum = tmp_path / "odd.tum"
+    tum.write_text(f"0 0 0 0 0 0 0 1\n1 {number} 0 0 0 0 0 1\n")
+    with pytest.raises(GraphFileError, match="outside the ASCII syntax") as raised:
+        read_trajectory(str(tum), "tum")
+    assert raised.value.line == 2
+
+
+def test_lines_end_at_newline_alone(tmp_path):
+    """Form feed, vertical tab, U+0085, U+2028 and U+2029 do not end a line (``str.splitlines``
+    would): an error after them names the line an editor shows, and a comment holding one is
+    a comment to its end."""
+    header = "VERTEX_SE2 0 0 0 0  # a comment \f VERTEX_SE2 0 x\n"
+    for separator in ("\f", "\v", "\x85", "\u2028", "\u2029", "\x1c"):
+        path = tmp_path / "separators.g2o"
+        path.write_text(
+            header
+            + f"# note{separator}more note\n"
+            + "VERTEX_SE2 1 1 0 0\n"
+            + "EDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\n"
+            + "EDGE_SE2 0 1 x 0 0 1 0 0 1 0 1\n"
+        )
+        with pytest.raises(GraphFileError) as raised:
+            read_graph(str(path))
+        assert raised.value.line == 5, separator
+        assert "'x' is not a number" in str(raised.value)
