@@ -14,7 +14,9 @@ import numpy as np
 import posegraph
 from posegraph.analysis.doctor import diagnose
 from posegraph.io import ReadResult
+from posegraph.io.atomic import output_batch
 from posegraph.io.conversion import convert as convert_graph
+from posegraph.io.conversion import output_format
 from posegraph.io.covariances import write_covariances
 from posegraph.problem.cholesky import NotPositiveDefinite
 from posegraph.solvers import Summary
@@ -25,11 +27,11 @@ from .common import (
     about,
     check_drop_rejected,
     check_output,
+    check_paths,
     check_writable,
     emit,
     noting_interruption,
     output_graph,
-    refuse_to_overwrite,
     solving_options,
     talks,
 )
@@ -39,8 +41,8 @@ from .summary import format_diagnosis, format_evaluation, format_summary
 
 
 def optimize(args: argparse.Namespace) -> int:
-    refuse_to_overwrite(args.input, args.output, args.overwrite)
-    refuse_to_overwrite(args.input, args.covariances, args.overwrite)
+    outputs = {"-o": args.output, "--plot": args.plot, "--covariances": args.covariances}
+    check_paths([args.input], outputs, args.overwrite)
     check_output(args.output)
     check_output(args.plot, figure=True)
     check_output(args.covariances, text=True)
@@ -78,7 +80,7 @@ def optimize(args: argparse.Namespace) -> int:
     }
     written = {"wrote": wrote, "plotted": args.plot, "covariances": args.covariances}
     text = format_summary(args.input, graph, summary, written, read.lifted_scale_information)
-    emit(args, record, text)
+    emit(args, record, text, inputs.warnings)
     return EXIT_OK if summary.converged else EXIT_NOT_CONVERGED
 
 
@@ -99,28 +101,31 @@ def _write_optimised(
     smoother: posegraph.Smoother,
     before: posegraph.PoseGraph,
 ) -> str | None:
-    """``optimize``'s outputs: the graph (``-o``), the figure and the covariances, the
-    covariances computed before anything is written. Returns how the report names ``-o``."""
+    """``optimize``'s outputs, all written or none (``output_batch``): the graph (``-o``), the
+    figure and the covariances. The graph is staged first, so that Ctrl-C during the later ones
+    still writes the converged result. Returns how the report names ``-o``."""
     graph = smoother.graph
-    covariances = _covariances(args.input, smoother) if args.covariances else None
     output, wrote = output_graph(args, smoother)
-    if args.output:
-        convert_graph(
-            output,
-            args.output,
-            g2o_rotation_information=args.g2o_rotation_information,
-            sim3_dialect=read.sim3_dialect or "a",
-        )
-    if args.plot:
-        from posegraph.plotting import plot_graphs
+    with output_batch():
+        if args.output:
+            convert_graph(
+                output,
+                args.output,
+                output_format(args.output),
+                g2o_rotation_information=args.g2o_rotation_information,
+                sim3_dialect=read.sim3_dialect or "a",
+            )
+        if args.plot:
+            from posegraph.plotting import plot_graphs
 
-        plot_graphs(
-            [("initial", before), ("optimised", smoother)],
-            args.plot,
-            title=os.path.basename(args.input),
-        )
-    if args.covariances:
-        write_covariances(args.covariances, graph.group.__name__, graph.node_ids, covariances)
+            plot_graphs(
+                [("initial", before), ("optimised", smoother)],
+                args.plot,
+                title=os.path.basename(args.input),
+            )
+        if args.covariances:
+            covariances = _covariances(args.input, smoother)
+            write_covariances(args.covariances, graph.group.__name__, graph.node_ids, covariances)
     return wrote
 
 
@@ -143,7 +148,7 @@ def info(args: argparse.Namespace) -> int:
 
 
 def convert(args: argparse.Namespace) -> int:
-    refuse_to_overwrite(args.input, args.output, args.overwrite)
+    check_paths([args.input], {"-o": args.output}, args.overwrite)
     check_output(args.output, args.to, remedy="; say --to g2o|toro|tum|kitti")
     inputs = Inputs(args)
     graph = inputs.graph(args.input).graph
@@ -160,13 +165,15 @@ def convert(args: argparse.Namespace) -> int:
         "edges": graph.num_edges,
         "skipped_lines": inputs.skipped_lines,
     }
-    emit(args, record, f"wrote {args.output} ({written}, {graph.num_nodes} poses)")
+    text = f"wrote {args.output} ({written}, {graph.num_nodes} poses)"
+    emit(args, record, text, inputs.warnings)
     return EXIT_OK
 
 
 def plot(args: argparse.Namespace) -> int:
     from posegraph.plotting import plot_graphs
 
+    check_paths(args.inputs, {"-o": args.output}, None)
     check_output(args.output, figure=True)
     inputs = Inputs(args)
     graphs = [(os.path.basename(p), inputs.graph(p).graph) for p in args.inputs]
@@ -177,11 +184,12 @@ def plot(args: argparse.Namespace) -> int:
         "output": args.output,
         "skipped_lines": inputs.skipped_lines,
     }
-    emit(args, record, f"wrote {args.output}")
+    emit(args, record, f"wrote {args.output}", inputs.warnings)
     return EXIT_OK
 
 
 def eval(args: argparse.Namespace) -> int:  # noqa: A001 - the subcommand's name
+    check_paths([args.estimate, args.ground_truth], {"--plot": args.plot}, None)
     check_output(args.plot, figure=True)
     inputs = Inputs(args)
     estimate = inputs.trajectory(args.estimate)
@@ -214,7 +222,7 @@ def eval(args: argparse.Namespace) -> int:  # noqa: A001 - the subcommand's name
         **evaluation.as_dict(),
         "skipped_lines": inputs.skipped_lines,
     }
-    emit(args, record, format_evaluation(evaluation))
+    emit(args, record, format_evaluation(evaluation), inputs.warnings)
     return EXIT_OK
 
 

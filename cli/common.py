@@ -13,7 +13,7 @@ from collections.abc import Iterator
 
 import posegraph
 from posegraph.io import ReadOptions, ReadResult, load_graph
-from posegraph.io.atomic import check_replaceable
+from posegraph.io.atomic import check_replaceable, is_special
 from posegraph.io.conversion import GRAPH_FORMATS, load_trajectory, output_format, unwritable_to
 from posegraph.io.trajectories import Trajectory
 from posegraph.lie import LieGroup
@@ -35,14 +35,16 @@ def read_options(args: argparse.Namespace) -> ReadOptions:
 
 class Inputs:
     """A command's input files, read with its options. What lenient reading skipped is kept for
-    the JSON document (``skipped_lines``) and, with ``warn_skipped`` in text mode, reported on
-    stderr as soon as it is read: the results leave out what those lines say (a node whose
-    vertex line was skipped keeps its edges)."""
+    the JSON document (``skipped_lines``) and, with ``warn_skipped``, as a warning (``warnings``)
+    that ``emit`` prints before the results, which leave out what those lines say (a node
+    whose vertex line was skipped keeps its edges). A command that stops prints its one line
+    of error alone."""
 
     def __init__(self, args: argparse.Namespace, warn_skipped: bool = True) -> None:
         self.options = read_options(args)
-        self.warn_skipped = warn_skipped and talks(args)
+        self.warn_skipped = warn_skipped
         self.skipped_lines: list[dict] = []
+        self.warnings: list[str] = []
 
     def graph(self, path: str) -> ReadResult:
         read = load_graph(path, self.options)
@@ -51,7 +53,8 @@ class Inputs:
             for why, count, line in read.skipped_by_reason()
         ]
         if read.skipped and self.warn_skipped:
-            warn(f"{path}: {read.skipped_report()}; the results leave out what those lines say")
+            report = read.skipped_report()
+            self.warnings.append(f"{path}: {report}; the results leave out what those lines say")
         return read
 
     def trajectory(self, path: str) -> Trajectory:
@@ -75,18 +78,41 @@ def talks(args: argparse.Namespace) -> bool:
     return not (args.json or args.quiet)
 
 
-def emit(args: argparse.Namespace, record: dict, text: str) -> None:
+def emit(args: argparse.Namespace, record: dict, text: str, warnings: list[str] = ()) -> None:
+    """Print the results: the JSON document, or the ``warnings`` (on stderr) and the text."""
     if args.json:
         print(json.dumps(json_safe(record), indent=2, allow_nan=False))
     elif not args.quiet:
+        for message in warnings:
+            warn(message)
         print(text)
 
 
-def refuse_to_overwrite(source: str, target: str | None, allowed: bool) -> None:
-    if target and not allowed and os.path.exists(target) and os.path.samefile(source, target):
-        raise UsageError(
-            "refusing to overwrite the input file; pass --overwrite to allow it", source
-        )
+def _same_file(first: str, second: str) -> bool:
+    """Whether two paths name one file: the same path once links are followed, or a hard link
+    to it. Devices and FIFOs are written through, so two uses of one are not a clash."""
+    if is_special(first) or is_special(second):
+        return False
+    if os.path.realpath(first) == os.path.realpath(second):
+        return True
+    return os.path.exists(first) and os.path.exists(second) and os.path.samefile(first, second)
+
+
+def check_paths(reads: list[str], writes: dict[str, str | None], overwrite: bool | None) -> None:
+    """Refuse, before any work, an output (flag → path) that is another output or an input.
+    ``-o`` may replace the first input (the graph) when ``overwrite`` (``--overwrite``) is set;
+    None: the command has no such option."""
+    outputs = [(flag, path) for flag, path in writes.items() if path]
+    for k, (flag, path) in enumerate(outputs):
+        for earlier_flag, earlier in outputs[:k]:
+            if _same_file(path, earlier):
+                raise UsageError(f"{earlier_flag} and {flag} name the same file", path)
+        for k, source in enumerate(reads):
+            allowed = flag == "-o" and k == 0
+            if not source or not _same_file(source, path) or (allowed and overwrite):
+                continue
+            advice = "; pass --overwrite to allow it" if allowed and overwrite is False else ""
+            raise UsageError(f"refusing to overwrite an input file with {flag}{advice}", path)
 
 
 def check_output(

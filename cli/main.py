@@ -1,9 +1,11 @@
 """Entry point of the ``posegraph`` command: parse the arguments (``parser``), run the command,
 and turn every error into one line and an exit code.
 
-Exit codes: 0 success; 1 ran but did not converge (or was interrupted); 2 bad input or usage;
-3 internal error. Bad input is reported as one line naming ``file:line``; ``--debug`` shows
-the traceback instead.
+Exit codes: 0 success; 1 ran but did not converge (or Ctrl-C stopped it after the best values
+so far were written); 2 bad input or usage; 3 internal error; 130 Ctrl-C with nothing written.
+Bad input is reported as one line naming ``file:line``; ``--debug`` shows the traceback instead.
+This module imports the library only once Ctrl-C is handled, so that it gives one line at any
+point.
 """
 
 from __future__ import annotations
@@ -15,19 +17,47 @@ import sys
 import traceback
 import warnings
 
-import posegraph
-
-from . import commands
 from .errors import EXIT_BAD_INPUT, EXIT_NOT_CONVERGED, UsageError, report
-from .parser import parser
-from .scale_drift import scale_drift
 
 EXIT_INTERNAL = 3
+EXIT_INTERRUPTED = 130
+"""128 + SIGINT, as a shell reports a command that Ctrl-C stopped."""
 
 
 def main(argv: list[str] | None = None) -> int:
+    arguments = sys.argv[1:] if argv is None else argv
+    try:
+        return _run(arguments)
+    except KeyboardInterrupt as interrupt:  # outside the iterations, which stop cleanly
+        written = getattr(interrupt, "paths", None)  # ``io.atomic.InterruptedAfterWriting``
+        if written:
+            message = f"interrupted (Ctrl-C): wrote {', '.join(written)}; the rest was not written"
+        else:
+            message = "interrupted (Ctrl-C); nothing written"
+        exit_code = EXIT_NOT_CONVERGED if written else EXIT_INTERRUPTED
+        report(message)
+        if "--json" in arguments:
+            command = next((a for a in arguments if not a.startswith("-")), "")
+            error = {"kind": "interrupted", "exit_code": exit_code, "message": message}
+            document = {"command": command, "error": {**error, "path": None, "line": None}}
+            print(json.dumps(document, indent=2))
+        return exit_code
+
+
+def _run(argv: list[str] | None) -> int:
+    from . import commands
+    from .parser import parser
+    from .scale_drift import scale_drift
+
     args = parser().parse_args(argv)
     handler = scale_drift if args.command == "scale-drift" else getattr(commands, args.command)
+    return _handle(args, handler)
+
+
+def _handle(args: argparse.Namespace, handler) -> int:
+    """Run ``handler(args)``; every error becomes one line and an exit code."""
+    import posegraph
+
     try:
         with warnings.catch_warnings():
             if not args.debug:  # numpy's overflow warnings name library lines, not the input's
@@ -53,11 +83,13 @@ def _stop(args: argparse.Namespace, exit_code: int, message: str, error: Excepti
     """Report why the command stopped as one line on stderr (unless ``--debug`` printed the
     traceback of an internal error) and, with ``--json``, as the document ``schema.ERROR`` on
     stdout, so that a script reading stdout is told too. Returns ``exit_code``."""
+    from posegraph.io import GraphFileError
+
     if exit_code == EXIT_BAD_INPUT or not args.debug:
         report(message)
     if args.json:
         path, line = None, None
-        if isinstance(error, posegraph.GraphFileError):
+        if isinstance(error, GraphFileError):
             path, line = error.path, error.line
         elif isinstance(error, UsageError):
             path = error.path

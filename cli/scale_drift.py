@@ -9,6 +9,7 @@ import os
 
 import posegraph
 from posegraph.io import ReadResult
+from posegraph.io.atomic import output_batch
 from posegraph.io.conversion import convert as convert_graph
 from posegraph.io.conversion import output_format
 from posegraph.io.trajectories import Trajectory, write_trajectory
@@ -20,15 +21,15 @@ from .common import (
     about,
     check_drop_rejected,
     check_output,
+    check_paths,
     check_writable,
     emit,
     noting_interruption,
     output_graph,
-    refuse_to_overwrite,
     solving_options,
     talks,
 )
-from .errors import EXIT_NOT_CONVERGED, EXIT_OK, warn
+from .errors import EXIT_NOT_CONVERGED, EXIT_OK
 from .progress import Progress
 from .summary import format_scale_drift
 
@@ -40,7 +41,7 @@ NO_SIM3_EDGE = (
 
 
 def scale_drift(args: argparse.Namespace) -> int:
-    refuse_to_overwrite(args.input, args.output, args.overwrite)
+    check_paths([args.input, args.gt], {"-o": args.output, "--plot": args.plot}, args.overwrite)
     check_output(args.output)
     check_output(args.plot, figure=True)
     check_drop_rejected(args)
@@ -48,8 +49,8 @@ def scale_drift(args: argparse.Namespace) -> int:
     inputs = Inputs(args)
     read = inputs.graph(args.input)
     graph = read.graph
-    if graph.group is posegraph.SE3 and talks(args):
-        warn(f"{args.input}: {NO_SIM3_EDGE}")
+    if graph.group is posegraph.SE3:
+        inputs.warnings.append(f"{args.input}: {NO_SIM3_EDGE}")
     if graph.group is not posegraph.SE2:  # refused below, by the correction
         check_writable(args.input, graph, args.output, group=posegraph.Sim3)
     truth = inputs.trajectory(args.gt) if args.gt else None  # read before the work
@@ -68,12 +69,13 @@ def scale_drift(args: argparse.Namespace) -> int:
         lifted = correction.lifted_scale_information
     after = Trajectory.of_graph(correction.graph, correction.poses)  # as asked for
     corrected = Trajectory.of_graph(correction.graph)  # world-from-camera
-    wrote = _write_corrected(args, read, correction, after)
     ate = None
     if truth is not None:
         ate = tuple(evaluate(poses, truth, "se3").ate.rmse for poses in (before, corrected))
-    if args.plot:
-        _plot_correction(args, before, corrected, truth)
+    with output_batch():  # all written or none; Ctrl-C during the figure keeps -o
+        wrote = _write_corrected(args, read, correction, after)
+        if args.plot:
+            _plot_correction(args, before, corrected, truth)
     record = {
         "command": "scale-drift",
         "input": args.input,
@@ -91,7 +93,7 @@ def scale_drift(args: argparse.Namespace) -> int:
     }
     written = {"wrote": wrote, "plotted": args.plot}
     text = format_scale_drift(args.input, correction, ate, written, lifted)
-    emit(args, record, text)
+    emit(args, record, text, inputs.warnings)
     return EXIT_OK if summary.converged else EXIT_NOT_CONVERGED
 
 

@@ -115,8 +115,8 @@ ERROR = {
             "type": "object",
             "required": ["kind", "exit_code", "message", "path", "line"],
             "properties": {
-                "kind": {"enum": ["bad_input", "internal"]},
-                "exit_code": {"enum": [2, 3]},
+                "kind": {"enum": ["bad_input", "internal", "interrupted"]},
+                "exit_code": {"enum": [1, 2, 3, 130]},
                 "message": {"type": "string"},
                 "path": _PATH_OR_NULL,
                 "line": {"type": ["integer", "null"], "minimum": 1},
@@ -124,8 +124,9 @@ ERROR = {
         },
     },
 }
-"""What ``--json`` prints instead when a command stops on bad input or an internal error:
-``message`` is the line on stderr; ``path`` and ``line`` name the file and line at fault."""
+"""What ``--json`` prints instead when a command stops on bad input, an internal error or
+Ctrl-C (exit 1 when outputs were written first, else 130): ``message`` is the line on stderr;
+``path`` and ``line`` name the file and line at fault."""
 
 SCHEMAS = {
     "scale-drift": {

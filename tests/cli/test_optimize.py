@@ -55,7 +55,12 @@ def test_version_and_help():
 
 def test_start_up_leaves_plotting_and_statistics_unloaded():
     """matplotlib and scipy.stats each add about 0.4 s to a start; only plotting needs the first."""
-    probe = "import sys, posegraph_cli.main; print(' '.join(sorted(sys.modules)))"
+    probe = (
+        "import contextlib, io, sys, posegraph_cli.main\n"
+        "with contextlib.suppress(SystemExit), contextlib.redirect_stdout(io.StringIO()):\n"
+        "    posegraph_cli.main.main(['--version'])\n"
+        "print(' '.join(sorted(sys.modules)))"
+    )
     loaded = subprocess.run(
         [sys.executable, "-c", probe], capture_output=True, text=True, check=True
     ).stdout.split()
