@@ -32,6 +32,7 @@ from .common import (
     emit,
     noting_interruption,
     output_graph,
+    reading_record,
     solving_options,
     talks,
 )
@@ -75,11 +76,14 @@ def optimize(args: argparse.Namespace) -> int:
         "nodes": graph.num_nodes,
         "edges": graph.num_edges,
         "lifted_scale_information": read.lifted_scale_information,
+        **reading_record(read, args),
         "summary": summary.as_dict(),
         "skipped_lines": inputs.skipped_lines,
     }
     written = {"wrote": wrote, "plotted": args.plot, "covariances": args.covariances}
-    text = format_summary(args.input, graph, summary, written, read.lifted_scale_information)
+    text = format_summary(
+        args.input, graph, summary, written, read.lifted_scale_information, record
+    )
     emit(args, record, text, inputs.warnings)
     return EXIT_OK if summary.converged else EXIT_NOT_CONVERGED
 
@@ -140,10 +144,18 @@ def _covariances(source: str, smoother: posegraph.Smoother) -> np.ndarray:
 
 
 def info(args: argparse.Namespace) -> int:
-    inputs = Inputs(args, warn_skipped=False)  # the report lists the skipped lines as a problem
-    diagnosis = diagnose(inputs.graph(args.input))
-    record = {"command": "info", **diagnosis.as_dict(), "skipped_lines": inputs.skipped_lines}
-    emit(args, record, format_diagnosis(diagnosis))
+    # Lenient always: the report lists what it skipped, by kind, as problems.
+    inputs = Inputs(args, warn_skipped=False, lenient=True)
+    read = inputs.graph(args.input)
+    diagnosis = diagnose(read)
+    reading = reading_record(read, args)
+    record = {
+        "command": "info",
+        **diagnosis.as_dict(),
+        **reading,
+        "skipped_lines": inputs.skipped_lines,
+    }
+    emit(args, record, format_diagnosis(diagnosis, reading))
     return EXIT_OK
 
 

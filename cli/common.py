@@ -29,6 +29,7 @@ def read_options(args: argparse.Namespace) -> ReadOptions:
         g2o_rotation_information=args.g2o_rotation_information,
         identity_information=args.identity_information,
         edge2_order=args.edge2_order,
+        repair_information=args.repair_information,
         scale_information=args.scale_information,
     )
 
@@ -40,8 +41,12 @@ class Inputs:
     whose vertex line was skipped keeps its edges). A command that stops prints its one line
     of error alone."""
 
-    def __init__(self, args: argparse.Namespace, warn_skipped: bool = True) -> None:
+    def __init__(
+        self, args: argparse.Namespace, warn_skipped: bool = True, lenient: bool = False
+    ) -> None:
         self.options = read_options(args)
+        if lenient:
+            self.options = dataclasses.replace(self.options, lenient=True)
         self.warn_skipped = warn_skipped
         self.skipped_lines: list[dict] = []
         self.warnings: list[str] = []
@@ -59,6 +64,15 @@ class Inputs:
 
     def trajectory(self, path: str) -> Trajectory:
         return load_trajectory(path, self.graph)
+
+
+def reading_record(read: ReadResult, args: argparse.Namespace) -> dict:
+    """How the information was read (``schema._READING``): the matrices repaired, and the
+    weighting of SE3 and Sim3 rotation information."""
+    rotation = None
+    if read.graph.group is not posegraph.SE2:
+        rotation = "quaternion" if args.g2o_rotation_information else "phi"
+    return {"repaired_information": read.repaired_information, "rotation_information": rotation}
 
 
 def json_safe(value):

@@ -118,6 +118,13 @@ def _reading() -> argparse.ArgumentParser:
         "default) or g2o (I11 I12 I13 I22 I23 I33, as gtsam's readG2o reads them)",
     )
     reading.add_argument(
+        "--repair-information",
+        choices=["psd", "isotropic"],
+        help="repair information matrices instead of refusing them: psd clips the eigenvalues of"
+        " those not positive semi-definite; isotropic gives every measurement SE-Sync's model"
+        " (one translation and one rotation precision)",
+    )
+    reading.add_argument(
         "--scale-information",
         type=float,
         help="information on log-scale of SE3 edges lifted to Sim3, in files mixing SE3 and Sim3 "

@@ -26,6 +26,7 @@ from .common import (
     emit,
     noting_interruption,
     output_graph,
+    reading_record,
     solving_options,
     talks,
 )
@@ -86,6 +87,7 @@ def scale_drift(args: argparse.Namespace) -> int:
         "edges": graph.num_edges,
         "scale_range": [float(correction.scales.min()), float(correction.scales.max())],
         "lifted_scale_information": lifted,
+        **reading_record(read, args),
         "summary": summary.as_dict(),
         "ate_before": ate[0] if ate else None,
         "ate_after": ate[1] if ate else None,

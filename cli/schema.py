@@ -128,6 +128,14 @@ ERROR = {
 Ctrl-C (exit 1 when outputs were written first, else 130): ``message`` is the line on stderr;
 ``path`` and ``line`` name the file and line at fault."""
 
+_READING = {
+    "repaired_information": {"type": "integer", "minimum": 0},
+    "rotation_information": {"enum": ["phi", "quaternion", None]},
+}
+"""How the information was read: the matrices that ``--repair-information`` changed, and the
+weighting of SE3 and Sim3 rotation information (over φ as gtsam; over the quaternion's vector
+as g2o, ``--g2o-rotation-information``; null for SE2)."""
+
 SCHEMAS = {
     "scale-drift": {
         "type": "object",
@@ -141,6 +149,8 @@ SCHEMAS = {
             "edges",
             "scale_range",
             "lifted_scale_information",
+            "repaired_information",
+            "rotation_information",
             "summary",
             "ate_before",
             "ate_after",
@@ -152,6 +162,7 @@ SCHEMAS = {
             "convention": {"enum": ["world_from_camera", "camera_from_world"]},
             "scale_range": {"type": "array", "items": _NUMBER, "minItems": 2, "maxItems": 2},
             "lifted_scale_information": {"type": ["number", "null"]},
+            **_READING,
             "summary": SUMMARY,
             "ate_before": {"type": ["number", "null"]},
             "ate_after": {"type": ["number", "null"]},
@@ -169,6 +180,8 @@ SCHEMAS = {
             "nodes",
             "edges",
             "lifted_scale_information",
+            "repaired_information",
+            "rotation_information",
             "summary",
             "skipped_lines",
         ],
@@ -183,6 +196,7 @@ SCHEMAS = {
             "nodes": {"type": "integer"},
             "edges": {"type": "integer"},
             "lifted_scale_information": {"type": ["number", "null"]},
+            **_READING,
             "summary": SUMMARY,
         },
     },
@@ -206,6 +220,8 @@ SCHEMAS = {
             "initial_chi2",
             "problems",
             "lifted_scale_information",
+            "repaired_information",
+            "rotation_information",
             "skipped_lines",
         ],
         "properties": {
@@ -218,6 +234,7 @@ SCHEMAS = {
             "singular_information": {"type": "integer", "minimum": 0},
             "loop_closures": {"type": "integer", "minimum": 0},
             "lifted_scale_information": {"type": ["number", "null"]},
+            **_READING,
             "problems": {
                 "type": "array",
                 "items": {

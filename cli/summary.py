@@ -14,18 +14,39 @@ if TYPE_CHECKING:
     from posegraph.sim3.scale_drift import ScaleDriftCorrection
 
 
+def reading_lines(reading: dict) -> list[str]:
+    """The report's lines on how the information was read (``common.reading_record``)."""
+    lines = []
+    if reading["repaired_information"]:
+        lines.append(
+            f"  information     {reading['repaired_information']} matrices repaired"
+            " (--repair-information)"
+        )
+    if reading["rotation_information"] == "phi":
+        lines.append(
+            "  rotation info   over φ, as gtsam reads it (g2o weighs it over the quaternion,"
+            " 4× less: --g2o-rotation-information)"
+        )
+    elif reading["rotation_information"] == "quaternion":
+        lines.append("  rotation info   over the quaternion's vector, as g2o weighs it")
+    return lines
+
+
 def format_summary(
     source: str,
     graph: PoseGraph,
     summary: Summary,
     written: dict[str, str | None],
     lifted_scale_information: float | None = None,
+    reading: dict | None = None,
 ) -> str:
     """The report of an optimisation; ``written``: the files written, by what they hold;
-    ``lifted_scale_information``: that of the SE3 lines of a file mixing SE3 and Sim3."""
+    ``lifted_scale_information``: that of the SE3 lines of a file mixing SE3 and Sim3;
+    ``reading``: how the information was read (``reading_lines``)."""
     phases = summary.phase_times
     lines = [
         f"{source}: {graph.group.__name__}, {graph.num_nodes} nodes, {graph.num_edges} edges",
+        *(reading_lines(reading) if reading else []),
         *_lifted_lines(lifted_scale_information),
         _initialisation_line(summary),
         *_error_lines(summary),
@@ -181,7 +202,7 @@ def _error_lines(summary: Summary) -> list[str]:
     return lines
 
 
-def format_diagnosis(d: Diagnosis) -> str:
+def format_diagnosis(d: Diagnosis, reading: dict | None = None) -> str:
     counts = ", ".join(f"{tag} {count}" for tag, count in d.tag_counts.items())
     lines = [
         f"{d.path} ({d.file_format}): {d.group} pose graph",
@@ -190,6 +211,7 @@ def format_diagnosis(d: Diagnosis) -> str:
         f" between nodes that are not consecutive), {d.priors} priors",
         f"  components      {len(d.components)} (sizes {', '.join(map(str, d.components[:5]))})",
         f"  gauge           {d.gauge}",
+        *(reading_lines(reading) if reading else []),
     ]
     kinds = []
     if d.singular_information:

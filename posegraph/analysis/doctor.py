@@ -229,12 +229,15 @@ def _edge_problems(graph: PoseGraph) -> list[Problem]:
 
 
 def _reading_problems(read: ReadResult) -> list[Problem]:
-    """Lines that lenient reading skipped, and nodes without a vertex line."""
-    problems = []
-    if read.skipped:
-        problems.append(
-            Problem(read.skipped_report(), "fix those lines, or accept that they are left out")
+    """Lines that lenient reading skipped, a problem per kind (``skipped_by_reason``), and nodes
+    without a vertex line."""
+    problems = [
+        Problem(
+            f"{count} line(s) skipped (first at line {line}): {why}",
+            "fix those lines (an option named above may read them); otherwise they are left out",
         )
+        for why, count, line in read.skipped_by_reason()
+    ]
     if read.nodes_without_vertex.size:
         read_line = " that was read" if read.skipped else ""
         problems.append(

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import re
 from collections import Counter
 
 import numpy as np
@@ -44,6 +45,8 @@ class ReadResult:
     se3_lines: SE3Lines | None = None
     """In a file mixing SE3 and Sim3 lines, which edges and priors were SE3 lines: read at
     scale 1 with no information on log-scale (``load_graph`` lifts them); None otherwise."""
+    repaired_information: int = 0
+    """Information matrices changed by ``ReadOptions.repair_information``."""
     lifted_scale_information: float | None = None
     """The information on log-scale that ``load_graph`` gave the SE3 lines of a file mixing
     SE3 and Sim3 (``ReadOptions.scale_information``, or its default); None if none were
@@ -51,7 +54,8 @@ class ReadResult:
 
     def skipped_by_reason(self) -> list[tuple[str, int, int]]:
         """(reason, how many lines, the first one's number) of the skipped lines, most frequent
-        reason first (ties in the order of their first line)."""
+        kind first (ties in the order of their first line); reasons that differ only in their
+        numbers are one kind, named by its first line's reason."""
         return skipped_by_reason(self.skipped)
 
     def skipped_report(self, reasons: int = 3) -> str:
@@ -60,13 +64,21 @@ class ReadResult:
         return skipped_report(self.skipped, reasons)
 
 
+_NUMBER = re.compile(r"(?<![\w.])[-+]?\d+(?:\.\d*)?(?:e[-+]?\d+)?")
+"""A number in a reason (a node id, λ_min, a count): reasons that differ only there are one
+kind."""
+
+
 def skipped_by_reason(skipped: list[tuple[int, str]]) -> list[tuple[str, int, int]]:
-    """``ReadResult.skipped_by_reason`` of (line, reason) pairs in line order."""
-    first_line: dict[str, int] = {}
+    """``ReadResult.skipped_by_reason`` of (line, reason) pairs in line order: reasons that
+    differ only in their numbers are counted together, under the first line's."""
+    first: dict[str, tuple[int, str]] = {}
+    counts: Counter = Counter()
     for line, why in skipped:
-        first_line.setdefault(why, line)
-    counts = Counter(why for _, why in skipped)
-    return [(why, count, first_line[why]) for why, count in counts.most_common()]
+        kind = _NUMBER.sub("#", why)
+        first.setdefault(kind, (line, why))
+        counts[kind] += 1
+    return [(first[kind][1], count, first[kind][0]) for kind, count in counts.most_common()]
 
 
 def skipped_report(skipped: list[tuple[int, str]], reasons: int = 3) -> str:
@@ -130,6 +142,7 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
         without_vertex,
         _sim3_dialect(sim3_rows),
         se3_lines,
+        collected.repaired,
     )
     if graph.num_nodes == 0:  # lenient reading skipped every vertex and edge line
         raise GraphFileError(

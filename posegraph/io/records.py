@@ -9,6 +9,7 @@ import dataclasses
 import numpy as np
 
 from ..graph import element_problems, information_problems, overflowing_edges
+from ..graph.repair import repair_information
 from ..lie import SE3
 from ..sim3.lifting import lift_information, lift_se3
 from .options import ReadOptions
@@ -36,6 +37,7 @@ class Collected:
     parameters: list = dataclasses.field(default_factory=list)  # (rows, SE3 offsets)
     fixes: list = dataclasses.field(default_factory=list)  # rows
     equivalences: list = dataclasses.field(default_factory=list)  # rows
+    repaired: int = 0  # information matrices changed by ``ReadOptions.repair_information``
 
 
 def embed_se3_records(collected: Collected) -> None:
@@ -82,19 +84,34 @@ def _drop(rows: Rows, measurements, information, bad: np.ndarray, message, check
     return checker.keep_good(rows, bad, message), measurements[~bad], information[~bad]
 
 
+REPAIR_ADVICE = (
+    "; --repair-information psd clips its eigenvalues, --repair-information isotropic takes"
+    " SE-Sync's model of one translation and one rotation precision"
+)
+
+
 def _check_information(rows: Rows, measurements, information, checker: LineChecker, options):
+    """The rows whose information the graph accepts, repaired first if the options say so
+    (``repair_information``; ``collected.repaired`` counts the matrices changed)."""
     bad, why = information_problems(information)
     advice = ""
     if rows.tag == "EDGE2" and bad.any():
         advice = _edge2_order_advice(rows, options.edge2_order)
-    return _drop(
-        rows,
-        measurements,
-        information,
-        bad,
-        lambda k: f"information matrix is {why(k)}{advice}",
-        checker,
-    )
+
+    def message(k: int) -> str:
+        reason = why(k)
+        repairable = reason.startswith("not positive semi-definite") and not advice
+        return f"information matrix is {reason}{advice}{REPAIR_ADVICE if repairable else ''}"
+
+    return _drop(rows, measurements, information, bad, message, checker)
+
+
+def _repaired(spec: TagFormat, information: np.ndarray, options, collected) -> np.ndarray:
+    if options.repair_information is None:
+        return information
+    information, changed = repair_information(information, spec.group, options.repair_information)
+    collected.repaired += int(np.count_nonzero(changed))
+    return information
 
 
 def _check_overflow(rows: Rows, measurements, information, checker: LineChecker):
@@ -183,6 +200,7 @@ def convert_rows(spec: TagFormat, rows: Rows, options: ReadOptions, checker, col
         rows, (measurements, information) = _parse(spec, rows, options, checker)
         if options.identity_information:
             information = np.broadcast_to(np.eye(spec.group.dof), information.shape).copy()
+        information = _repaired(spec, information, options, collected)
         converted = _check_information(rows, measurements, information, checker, options)
         converted = _check_overflow(*converted, checker)
         if len(converted[0]):

@@ -45,7 +45,7 @@ def test_info_reports_problems_with_suggestions(tmp_path):
     assert "odometry chain breaks" in problems
     last = len(lines) + 1
     assert (
-        f"1 line(s) skipped: 1 × EDGE_SE2: edge from node 5 to itself (first at line {last})"
+        f"1 line(s) skipped (first at line {last}): EDGE_SE2: edge from node 5 to itself"
         in problems
     )
     text = run("info", broken, "--lenient").stdout
@@ -475,3 +475,31 @@ def test_reports_give_the_scale_information_of_lifted_se3_odometry(tmp_path):
     assert suggested["lifted_scale_information"] == two_percent
     assert suggested["summary"]["rejected_edges"] == []
     assert max(suggested["ate_after"], kept["ate_after"]) * 100 < stiff["ate_after"]
+
+
+def test_info_reads_leniently_and_names_the_repair(tmp_path):
+    """``info`` never refuses a file it can parse: indefinite information is listed as a problem
+    with its count, first line and the option; ``optimize`` then reads it with that option, and
+    the reports say how the information was read."""
+    source = tmp_path / "indefinite.g2o"
+    lines = open(EXAMPLE).read().splitlines()
+    edges = [k for k, line in enumerate(lines) if line.startswith("EDGE_SE3:QUAT")]
+    for k in edges[5:8]:
+        fields = lines[k].split()
+        fields[9 + 11 : 9 + 13] = ["84022", "132748"]  # the (z, qx), (z, qy) entries
+        lines[k] = " ".join(fields)
+    source.write_text("\n".join(lines) + "\n")
+    run("optimize", source, check_exit=2)
+    document = run_json("info", source)
+    assert document["skipped_lines"][0]["count"] == 3
+    [problem] = [p for p in document["problems"] if "semi-definite" in p["what"]]
+    assert problem["what"].startswith(f"3 line(s) skipped (first at line {edges[5] + 1})")
+    assert "--repair-information psd" in problem["what"]
+    assert document["rotation_information"] == "phi" and document["repaired_information"] == 0
+    repaired = run_json("optimize", source, "--repair-information", "psd")
+    assert repaired["repaired_information"] == 3 and repaired["edges"] == len(edges)
+    text = run("optimize", source, "--repair-information", "isotropic").stdout
+    assert f"information     {len(edges)} matrices repaired" in text
+    assert "rotation info   over φ, as gtsam reads it" in text
+    g2o = run_json("optimize", source, "--repair-information", "psd", "--g2o-rotation-information")
+    assert g2o["rotation_information"] == "quaternion"

@@ -282,3 +282,18 @@ def test_gnss_fixes_given_the_poses_rotations_reach_gtsams_position_only_optimum
     turned[:, :3, 3] = fixes.measurements.translation
     without_fixes.add_priors(track.node_ids[fixes.i], turned, fixes.information)
     assert distance_to_gtsams_optimum(without_fixes) < 0.01
+
+
+@pytest.mark.parametrize("repair", ["psd", "isotropic"])
+def test_cubicle_repaired_reaches_an_optimum_gtsam_cannot_lower(shared_dataset, repair):
+    """cubicle.g2o: 5,021 of its 16,869 information matrices are not positive semi-definite.
+    Repaired, posegraph's optimum is one that gtsam's graph of the same repaired matrices
+    scores the same and that gtsam's LM, started there, does not lower."""
+    path = str(shared_dataset("cubicle.g2o"))
+    read = load_graph(path, ReadOptions(repair_information=repair))
+    graph = read.graph
+    assert read.repaired_information == (5021 if repair == "psd" else graph.num_edges)
+    assert graph.num_edges == 16869
+    ours = posegraph.optimize(graph).summary.final_error
+    factors, _ = bridge.graph_to_gtsam(graph)
+    _assert_gtsam_scores_and_cannot_lower(factors, graph, ours)

@@ -13,6 +13,7 @@ import posegraph
 from posegraph.analysis.doctor import diagnose
 from posegraph.graph import PoseGraph
 from posegraph.io import GraphFileError, ReadOptions, load_graph, read_graph, write_graph
+from posegraph.io.records import REPAIR_ADVICE
 from posegraph.lie import SE2, SE3, Sim3
 from posegraph.problem.factors import chi2
 from posegraph.solvers import solve
@@ -396,7 +397,8 @@ def test_lenient_mode_skips_sim3_lines_the_graph_would_refuse(tmp_path):
                 f"EDGE_SE2 1 2 1 0 0 {INFORMATION_SE2}",  # keeps node 2: its vertex was skipped
             ],
             4,
-            "EDGE_SE2: information matrix is not positive semi-definite (λ_min = -1)",
+            "EDGE_SE2: information matrix is not positive semi-definite (λ_min = -1)"
+            + REPAIR_ADVICE,
             2,
             [2, 4, 5],
         ),
