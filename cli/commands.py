@@ -24,6 +24,7 @@ from posegraph.trajectory.evaluation import evaluate
 
 from .common import (
     Inputs,
+    Kept,
     about,
     check_drop_rejected,
     check_output,
@@ -33,6 +34,7 @@ from .common import (
     noting_interruption,
     output_graph,
     reading_record,
+    set_aside_rejected,
     solving_options,
     talks,
 )
@@ -51,7 +53,7 @@ def optimize(args: argparse.Namespace) -> int:
     solving = solving_options(args)
     inputs = Inputs(args)
     read = inputs.graph(args.input)
-    graph = read.graph
+    graph, kept = set_aside_rejected(read, args.readmit_rejected)
     if args.fix:
         try:
             graph.fix(args.fix)
@@ -65,7 +67,7 @@ def optimize(args: argparse.Namespace) -> int:
             result = smoother.optimize(callback=progress, **solving)
     summary = noting_interruption(progress, result.summary)
     _refuse_non_finite(summary, args.input)
-    wrote = _write_optimised(args, read, smoother, before)
+    wrote = _write_optimised(args, read, smoother, before, kept)
     record = {
         "command": "optimize",
         "input": args.input,
@@ -104,20 +106,23 @@ def _write_optimised(
     read: ReadResult,
     smoother: posegraph.Smoother,
     before: posegraph.PoseGraph,
+    kept: Kept | None,
 ) -> str | None:
-    """``optimize``'s outputs, all written or none (``output_batch``): the graph (``-o``), the
-    figure and the covariances. The graph is staged first, so that Ctrl-C during the later ones
-    still writes the converged result. Returns how the report names ``-o``."""
+    """``optimize``'s outputs, all written or none (``output_batch``): the graph (``-o``, what
+    was rejected or set aside marked: ``output_graph``), the figure and the covariances. The
+    graph is staged first, so that Ctrl-C during the later ones still writes the converged
+    result. Returns how the report names ``-o``."""
     graph = smoother.graph
-    output, wrote = output_graph(args, smoother)
+    output, rejected, wrote = output_graph(args, smoother, read.graph, kept)
     with output_batch():
         if args.output:
             convert_graph(
                 output,
                 args.output,
                 output_format(args.output),
-                g2o_rotation_information=args.g2o_rotation_information,
                 sim3_dialect=read.sim3_dialect or "a",
+                g2o_rotation_information=args.g2o_rotation_information,
+                rejected=rejected,
             )
         if args.plot:
             from posegraph.plotting import plot_graphs
@@ -163,10 +168,16 @@ def convert(args: argparse.Namespace) -> int:
     check_paths([args.input], {"-o": args.output}, args.overwrite)
     check_output(args.output, args.to, remedy="; say --to g2o|toro|tum|kitti")
     inputs = Inputs(args)
-    graph = inputs.graph(args.input).graph
+    read = inputs.graph(args.input)
+    graph = read.graph
     check_writable(args.input, graph, args.output, to=args.to)
     written = convert_graph(
-        graph, args.output, args.to, args.sim3_dialect, args.g2o_rotation_information
+        graph,
+        args.output,
+        args.to,
+        args.sim3_dialect,
+        args.g2o_rotation_information,
+        read.rejected,  # kept marked
     )
     record = {
         "command": "convert",
@@ -188,7 +199,7 @@ def plot(args: argparse.Namespace) -> int:
     check_paths(args.inputs, {"-o": args.output}, None)
     check_output(args.output, figure=True)
     inputs = Inputs(args)
-    graphs = [(os.path.basename(p), inputs.graph(p).graph) for p in args.inputs]
+    graphs = [(os.path.basename(p), inputs.graph(p)) for p in args.inputs]  # rejections too
     plot_graphs(graphs, args.output, title=args.title, view=args.view)
     record = {
         "command": "plot",

@@ -11,16 +11,22 @@ import math
 import os
 from collections.abc import Iterator
 
+import numpy as np
+
 import posegraph
 from posegraph.io import ReadOptions, ReadResult, load_graph
 from posegraph.io.atomic import check_replaceable, is_special
 from posegraph.io.conversion import GRAPH_FORMATS, load_trajectory, output_format, unwritable_to
 from posegraph.io.trajectories import Trajectory
+from posegraph.io.writer import Rejected
 from posegraph.lie import LieGroup
 from posegraph.solvers import SolverOptions, Summary
 
 from .errors import UsageError, warn
 from .progress import Progress
+
+Kept = tuple[np.ndarray, np.ndarray]
+"""Masks over a file's between edges and priors of those solved (not set aside)."""
 
 
 def read_options(args: argparse.Namespace) -> ReadOptions:
@@ -172,19 +178,53 @@ def check_drop_rejected(args: argparse.Namespace) -> None:
         )
 
 
+def set_aside_rejected(read: ReadResult, readmit: bool) -> tuple[posegraph.PoseGraph, Kept | None]:
+    """The graph to solve: the file's without the measurements that its lines mark rejected (a
+    robust run's output), unless ``readmit`` (``--readmit-rejected``); and the masks of the
+    edges and priors kept (None if none was set aside)."""
+    if read.rejected is None or readmit:
+        return read.graph, None
+    edges, priors = read.rejected
+    graph = read.graph.with_edges(~edges)
+    graph.remove_priors(priors)
+    return graph, (~edges, ~priors)
+
+
 def output_graph(
-    args: argparse.Namespace, smoother: posegraph.Smoother
-) -> tuple[posegraph.PoseGraph, str | None]:
-    """The graph that ``-o`` gets (without the rejected measurements, with ``--drop-rejected``)
-    and how the report names the file."""
+    args: argparse.Namespace,
+    smoother: posegraph.Smoother,
+    source: posegraph.PoseGraph,
+    kept: Kept | None,
+) -> tuple[posegraph.PoseGraph, Rejected | None, str | None]:
+    """The graph that ``-o`` gets, the masks of its measurements to mark rejected, and how the
+    report names the file. The solved values go on the file's graph ``source`` (lifted to the
+    solved group), every measurement in its order: those set aside (``kept`` False) and those
+    the robust run rejected are marked. With ``--drop-rejected``, the inliers alone."""
     graph = smoother.graph
-    if not args.drop_rejected:
-        return graph, args.output
-    inliers = smoother.without_rejected()
-    left_out = f"{graph.num_edges - inliers.num_edges} rejected edge(s)"
-    if len(inliers.priors) < len(graph.priors):
-        left_out += f" and {len(graph.priors) - len(inliers.priors)} rejected prior(s)"
-    return inliers, f"{args.output} (without the {left_out})"
+    if args.drop_rejected:
+        inliers = smoother.without_rejected()
+        left_out = f"{graph.num_edges - inliers.num_edges} rejected edge(s)"
+        if len(inliers.priors) < len(graph.priors):
+            left_out += f" and {len(graph.priors) - len(inliers.priors)} rejected prior(s)"
+        return inliers, None, f"{args.output} (without the {left_out})"
+    edges, priors = smoother.rejected()
+    if kept is not None:
+        full = source.copy()
+        full.set_values(graph.values, check=False)
+        full.fixed = graph.fixed.copy()
+        edges, priors = _spread(edges, kept[0]), _spread(priors, kept[1])
+        graph = full
+    if not (edges.any() or priors.any()):
+        return graph, None, args.output
+    marked = np.count_nonzero(edges) + np.count_nonzero(priors)
+    return graph, (edges, priors), f"{args.output} ({marked} marked rejected)"
+
+
+def _spread(rejected: np.ndarray, kept: np.ndarray) -> np.ndarray:
+    """A mask over all measurements: those not ``kept``, and the kept ones ``rejected``."""
+    spread = ~kept
+    spread[kept] = rejected
+    return spread
 
 
 def check_writable(

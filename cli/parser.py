@@ -173,7 +173,14 @@ def _solving() -> argparse.ArgumentParser:
     solving.add_argument(
         "--drop-rejected",
         action="store_true",
-        help="leave the edges and priors that --robust rejected out of -o's graph (g2o or TORO)",
+        help="leave the edges and priors that --robust rejected out of -o's graph (g2o or TORO);"
+        " without it they are written commented out, marked rejected",
+    )
+    solving.add_argument(
+        "--readmit-rejected",
+        action="store_true",
+        help="solve with the edges and priors that the file marks rejected (by default they are"
+        " set aside, as the robust run that marked them did, and written back marked)",
     )
     solving.add_argument("--max-iterations", type=at_least(0), default=100, help="default: 100")
     solving.add_argument("--time-limit", type=at_least(0, float), help="seconds")

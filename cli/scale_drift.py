@@ -13,11 +13,12 @@ from posegraph.io.atomic import output_batch
 from posegraph.io.conversion import convert as convert_graph
 from posegraph.io.conversion import output_format
 from posegraph.io.trajectories import Trajectory, write_trajectory
-from posegraph.sim3.scale_drift import correct_scale_drift
+from posegraph.sim3.scale_drift import correct_scale_drift, lift_graph
 from posegraph.trajectory.evaluation import evaluate
 
 from .common import (
     Inputs,
+    Kept,
     about,
     check_drop_rejected,
     check_output,
@@ -27,6 +28,7 @@ from .common import (
     noting_interruption,
     output_graph,
     reading_record,
+    set_aside_rejected,
     solving_options,
     talks,
 )
@@ -49,7 +51,7 @@ def scale_drift(args: argparse.Namespace) -> int:
     solving = solving_options(args)
     inputs = Inputs(args)
     read = inputs.graph(args.input)
-    graph = read.graph
+    graph, kept = set_aside_rejected(read, args.readmit_rejected)
     if graph.group is posegraph.SE3:
         inputs.warnings.append(f"{args.input}: {NO_SIM3_EDGE}")
     if graph.group is not posegraph.SE2:  # refused below, by the correction
@@ -74,7 +76,7 @@ def scale_drift(args: argparse.Namespace) -> int:
     if truth is not None:
         ate = tuple(evaluate(poses, truth, "se3").ate.rmse for poses in (before, corrected))
     with output_batch():  # all written or none; Ctrl-C during the figure keeps -o
-        wrote = _write_corrected(args, read, correction, after)
+        wrote = _write_corrected(args, read, correction, after, kept)
         if args.plot:
             _plot_correction(args, before, corrected, truth)
     record = {
@@ -99,16 +101,22 @@ def scale_drift(args: argparse.Namespace) -> int:
     return EXIT_OK if summary.converged else EXIT_NOT_CONVERGED
 
 
-def _write_corrected(args, read: ReadResult, correction, after: Trajectory) -> str | None:
-    """``scale-drift``'s ``-o``: the corrected poses (TUM or KITTI) or the Sim3 graph. Returns
-    how the report names it."""
-    output, wrote = output_graph(args, correction.smoother)
+def _write_corrected(
+    args, read: ReadResult, correction, after: Trajectory, kept: Kept | None
+) -> str | None:
+    """``scale-drift``'s ``-o``: the corrected poses (TUM or KITTI) or the Sim3 graph (what
+    was rejected or set aside marked: ``output_graph``). Returns how the report names it."""
+    source = read.graph
+    if kept is not None and source.group is not correction.graph.group:  # an SE3 file's
+        source = lift_graph(source, correction.lifted_scale_information)
+    output, rejected, wrote = output_graph(args, correction.smoother, source, kept)
     if args.output:
         written = output_format(args.output)
         if written in ("tum", "kitti"):
             write_trajectory(after, args.output, written)
         else:
-            convert_graph(output, args.output, written, sim3_dialect=read.sim3_dialect or "a")
+            dialect = read.sim3_dialect or "a"
+            convert_graph(output, args.output, written, dialect, rejected=rejected)
     return wrote
 
 

@@ -27,6 +27,7 @@ from .graph import (
     odometry_mask,  # noqa: E402
 )
 from .io.atomic import atomic_path  # noqa: E402
+from .io.reader import ReadResult  # noqa: E402
 from .io.trajectories import as_se3  # noqa: E402
 from .lie import SE2  # noqa: E402
 from .smoother import Smoother  # noqa: E402
@@ -125,26 +126,34 @@ def save_figure(figure, path: str) -> None:
         plt.close(figure)
 
 
-def _graph(drawn: PoseGraph | Smoother) -> PoseGraph:
-    return drawn.graph if isinstance(drawn, Smoother) else drawn
+Drawn = PoseGraph | Smoother | ReadResult
+"""What a figure draws: a graph; a smoother, with what its last robust solve rejected; or a
+file read, with what its lines mark rejected (``ReadResult.rejected``)."""
 
 
-def _rejected(drawn: PoseGraph | Smoother) -> tuple[np.ndarray, np.ndarray]:
-    """Masks over the edges and priors of what a smoother's last robust solve rejected (none
-    for a graph alone)."""
+def _graph(drawn: Drawn) -> PoseGraph:
+    return drawn if isinstance(drawn, PoseGraph) else drawn.graph
+
+
+def _rejected(drawn: Drawn) -> tuple[np.ndarray, np.ndarray]:
+    """Masks over the edges and priors of what was rejected (none for a graph alone)."""
     if isinstance(drawn, Smoother):
         return drawn.rejected()
-    return np.zeros(drawn.num_edges, dtype=bool), np.zeros(len(drawn.priors), dtype=bool)
+    if isinstance(drawn, ReadResult) and drawn.rejected is not None:
+        return drawn.rejected
+    graph = _graph(drawn)
+    return np.zeros(graph.num_edges, dtype=bool), np.zeros(len(graph.priors), dtype=bool)
 
 
 def plot_graphs(
-    graphs: list[tuple[str, PoseGraph | Smoother]],
+    graphs: list[tuple[str, Drawn]],
     path: str,
     title: str | None = None,
     view: str = "auto",
 ) -> None:
-    """Overlay pose graphs (label, graph or smoother) in one figure written to ``path``; a
-    smoother's graph is drawn with what its last robust solve rejected dashed and circled."""
+    """Overlay pose graphs (label, ``Drawn``) in one figure written to ``path``; what a
+    smoother's last robust solve rejected, or a file's lines mark rejected, is drawn dashed
+    and circled."""
     drawn = [(label, _graph(item), _rejected(item)) for label, item in graphs]
     three_d = view == "3d" or (view == "auto" and any(g.group is not SE2 for _, g, _ in drawn))
     figure, axes = _new_axes(three_d)

@@ -94,9 +94,12 @@ def _finite_errors(graph: PoseGraph, edges: _Measured, priors: _Measured, checke
     return edges_kept, priors_kept
 
 
-def assemble(group, collected: Collected, checker: LineChecker, skipped_vertices: dict):
-    """The graph of the lines collected, the ids of its nodes without a vertex value, and the
-    masks of its edges and of its priors read from SE3 lines (``SE3Lines``).
+def assemble(
+    group, collected: Collected, checker: LineChecker, skipped_vertices: dict, rejected: set
+):
+    """The graph of the lines collected, the ids of its nodes without a vertex value, the
+    masks of its edges and of its priors read from SE3 lines (``SE3Lines``), and the masks of
+    those on the ``rejected`` lines (None if none).
 
     Edges and priors may name nodes without a vertex line only in a file that has none; then
     no node has a value. A node whose vertex line lenient reading skipped
@@ -138,7 +141,13 @@ def assemble(group, collected: Collected, checker: LineChecker, skipped_vertices
     se3_lines = None
     if group is not SE3 and (se3_edges.any() or se3_priors.any()):
         se3_lines = SE3Lines(se3_edges, se3_priors)
-    return graph, without_vertex, se3_lines
+    marked = None
+    if rejected:
+        marked = tuple(
+            np.isin(np.concatenate(measured.lines)[kept], list(rejected))
+            for measured, kept in ((edges, edges_kept), (priors, priors_kept))
+        )
+    return graph, without_vertex, se3_lines, marked
 
 
 def _add_holds(graph: PoseGraph, collected: Collected, checker, skipped_vertices: dict) -> None:

@@ -13,7 +13,7 @@ from .load import load_graph
 from .parsing import read_lines
 from .reader import ReadResult
 from .trajectories import Trajectory, read_trajectory, write_trajectory
-from .writer import GRAPH_SUFFIXES, unwritable, write_graph
+from .writer import GRAPH_SUFFIXES, Rejected, unwritable, write_graph
 
 SUFFIX_FORMATS = {**GRAPH_SUFFIXES, ".tum": "tum", ".kitti": "kitti"}
 GRAPH_FORMATS = ("g2o", "toro")
@@ -64,11 +64,13 @@ def convert(
     to: str | None = None,
     sim3_dialect: str = "a",
     g2o_rotation_information: bool = False,
+    rejected: Rejected | None = None,
 ) -> str:
-    """Write ``graph`` to ``path`` as a graph or as its poses' trajectory; returns the format."""
+    """Write ``graph`` to ``path`` as a graph (its ``rejected`` measurements marked) or as its
+    poses' trajectory; returns the format."""
     file_format = output_format(path, to)
     if file_format in GRAPH_FORMATS:
-        write_graph(graph, path, file_format, g2o_rotation_information, sim3_dialect)
+        write_graph(graph, path, file_format, g2o_rotation_information, sim3_dialect, rejected)
     else:
         write_trajectory(Trajectory.of_graph(graph), path, file_format)
     return file_format

@@ -90,10 +90,18 @@ def paused_garbage_collection() -> Iterator[None]:
             gc.enable()
 
 
-def _code_lines(path: str) -> Iterator[tuple[int, str]]:
+REJECTED_PREFIX = "# posegraph:rejected "
+"""Starts the line of a measurement that a robust run rejected: a comment to g2o and gtsam,
+which then read the graph without it; posegraph reads it back as rejected
+(``ReadResult.rejected``)."""
+
+
+def _code_lines(path: str, rejected: set[int] | None = None) -> Iterator[tuple[int, str]]:
     """(line number, text before any ``#``) of every line that is not blank or a comment.
     UTF-8, with or without a byte-order mark. Lines end at ``\n`` alone, as g2o, gtsam and
-    editors count them (a form feed or U+2028 inside a line or a comment does not end it)."""
+    editors count them (a form feed or U+2028 inside a line or a comment does not end it).
+    Given a set ``rejected``, a line that starts with ``REJECTED_PREFIX`` is read as the line
+    after it, and its number added to the set; otherwise it is a comment."""
     try:
         text = Path(path).read_text(encoding="utf-8-sig")
     except FileNotFoundError:
@@ -105,6 +113,9 @@ def _code_lines(path: str) -> Iterator[tuple[int, str]]:
     except OSError as error:
         raise GraphFileError(path, None, f"cannot be read ({error.strerror})") from None
     for number, line in enumerate(text.split("\n"), start=1):
+        if rejected is not None and line.startswith(REJECTED_PREFIX):
+            line = line[len(REJECTED_PREFIX) :]
+            rejected.add(number)
         code = line.partition("#")[0]
         if code and not code.isspace():
             yield number, code
@@ -128,11 +139,12 @@ def read_lines(path: str) -> list[tuple[int, list[str]]]:
 
 
 @paused_garbage_collection()
-def read_tagged_lines(path: str) -> list[tuple[int, str, str]]:
+def read_tagged_lines(path: str, rejected: set[int] | None = None) -> list[tuple[int, str, str]]:
     """(line number, tag, the text after the tag) of every line that is not blank or a
-    comment, as ``read_lines`` finds them: three objects a line instead of one a token."""
+    comment, as ``read_lines`` finds them: three objects a line instead of one a token. Lines
+    marked rejected are read too, their numbers added to ``rejected`` (``_code_lines``)."""
     tagged = []
-    for number, code in _code_lines(path):
+    for number, code in _code_lines(path, rejected):
         tag, *rest = code.split(None, 1)
         tagged.append((number, tag, rest[0] if rest else ""))
     return tagged

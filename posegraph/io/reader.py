@@ -47,6 +47,10 @@ class ReadResult:
     scale 1 with no information on log-scale (``load_graph`` lifts them); None otherwise."""
     repaired_information: int = 0
     """Information matrices changed by ``ReadOptions.repair_information``."""
+    rejected: tuple[np.ndarray, np.ndarray] | None = None
+    """Masks over the graph's between edges and priors of those whose lines a robust run
+    marked rejected (``parsing.REJECTED_PREFIX``); None if no line is marked. They are in the
+    graph: leave them out to reproduce that run (``PoseGraph.with_edges``)."""
     lifted_scale_information: float | None = None
     """The information on log-scale that ``load_graph`` gave the SE3 lines of a file mixing
     SE3 and Sim3 (``ReadOptions.scale_information``, or its default); None if none were
@@ -106,8 +110,47 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
     path = str(path)
     options = ReadOptions() if options is None else options
     checker = LineChecker(path, options.lenient)
-    lines_by_tag = _lines_by_tag(path, options, checker)
+    rejected_lines: set[int] = set()
+    lines_by_tag = _lines_by_tag(path, options, checker, rejected_lines)
     group = _group_of(path, lines_by_tag, checker)
+    collected = _collected(lines_by_tag, options, checker)
+
+    sim3_rows = [
+        rows
+        for rows, *_ in collected.vertices + collected.edges
+        if ALL_TAGS[rows.tag].group is Sim3
+    ]
+    if group is Sim3 and not sim3_rows:
+        group = SE3  # every Sim3 line was skipped (lenient): the SE3 lines are the graph
+    if group is Sim3:
+        embed_se3_records(collected)
+    skipped_vertices = skipped_vertex_lines(lines_by_tag, checker)
+    graph, without_vertex, se3_lines, rejected = assemble(
+        group, collected, checker, skipped_vertices, rejected_lines
+    )
+    checker.raise_first()
+    read = ReadResult(
+        graph,
+        path,
+        "toro" if any(t in TORO_TAGS for t in lines_by_tag) else "g2o",
+        _tag_counts(collected),
+        sorted(checker.skipped),
+        without_vertex,
+        _sim3_dialect(sim3_rows),
+        se3_lines,
+        collected.repaired,
+        rejected,
+    )
+    if graph.num_nodes == 0:  # lenient reading skipped every vertex and edge line
+        raise GraphFileError(
+            path, None, f"holds no vertex or edge that could be read ({read.skipped_report()})"
+        )
+    return read
+
+
+def _collected(lines_by_tag: dict[str, list], options: ReadOptions, checker) -> Collected:
+    """Each tag's lines checked and converted (``convert_rows``), priors' offsets applied;
+    strict reading stops here at the first bad line."""
     collected = Collected()
     for tag, entries in lines_by_tag.items():
         spec = ALL_TAGS[tag]
@@ -120,41 +163,16 @@ def read_graph(path: str, options: ReadOptions | None = None) -> ReadResult:
             convert_rows(spec, rows, options, checker, collected)
     apply_prior_offsets(collected, checker)
     checker.raise_first()
-
-    sim3_rows = [
-        rows
-        for rows, *_ in collected.vertices + collected.edges
-        if ALL_TAGS[rows.tag].group is Sim3
-    ]
-    if group is Sim3 and not sim3_rows:
-        group = SE3  # every Sim3 line was skipped (lenient): the SE3 lines are the graph
-    if group is Sim3:
-        embed_se3_records(collected)
-    skipped_vertices = skipped_vertex_lines(lines_by_tag, checker)
-    graph, without_vertex, se3_lines = assemble(group, collected, checker, skipped_vertices)
-    checker.raise_first()
-    read = ReadResult(
-        graph,
-        path,
-        "toro" if any(t in TORO_TAGS for t in lines_by_tag) else "g2o",
-        _tag_counts(collected),
-        sorted(checker.skipped),
-        without_vertex,
-        _sim3_dialect(sim3_rows),
-        se3_lines,
-        collected.repaired,
-    )
-    if graph.num_nodes == 0:  # lenient reading skipped every vertex and edge line
-        raise GraphFileError(
-            path, None, f"holds no vertex or edge that could be read ({read.skipped_report()})"
-        )
-    return read
+    return collected
 
 
-def _lines_by_tag(path: str, options: ReadOptions, checker: LineChecker) -> dict[str, list]:
-    """The file's (line number, text) pairs by tag; unknown tags refused (strict) or skipped."""
+def _lines_by_tag(
+    path: str, options: ReadOptions, checker: LineChecker, rejected: set[int]
+) -> dict[str, list]:
+    """The file's (line number, text) pairs by tag, lines marked rejected among them (their
+    numbers put in ``rejected``); unknown tags refused (strict) or skipped."""
     lines_by_tag: dict[str, list] = {}
-    for number, tag, text in read_tagged_lines(path):
+    for number, tag, text in read_tagged_lines(path, rejected):
         if tag not in ALL_TAGS:
             checker.fail(number, _unknown_tag_reason(tag, options))
             continue

@@ -11,7 +11,7 @@ import numpy as np
 from ..graph import PoseGraph
 from ..lie import SE2, SE3, LieGroup, Sim3
 from .atomic import atomic_write_text
-from .parsing import paused_garbage_collection, upper_from_symmetric
+from .parsing import REJECTED_PREFIX, paused_garbage_collection, upper_from_symmetric
 from .tags import (
     matrix_to_rpy,
     se3_information_to_file,
@@ -108,11 +108,44 @@ def sim3_edge_lines(
     return _lines("EDGE_SIM3:EXPMAP", [i_ids, j_ids], numbers)
 
 
+MEASUREMENT_TAGS = {
+    "g2o": {SE2: ("EDGE_SE2", "EDGE_PRIOR_SE2"), SE3: ("EDGE_SE3:QUAT", "EDGE_SE3_PRIOR")},
+    "toro": {SE2: ("EDGE2", None), SE3: ("EDGE3", None)},
+}
+"""The tags a graph's between edges and priors are written with, by format and group."""
+MEASUREMENT_TAGS["g2o"][Sim3] = ("EDGE_SIM3:EXPMAP", None)
+
+Rejected = tuple[np.ndarray, np.ndarray]
+"""Masks over a graph's between edges and over its priors of those a robust run rejected."""
+
+
+def _marked(lines: list[str], rejected: Rejected | None, tags: tuple) -> list[str]:
+    """The lines, those of the rejected edges and priors (in order of their tags ``tags``)
+    behind ``REJECTED_PREFIX``."""
+    if rejected is None:
+        return lines
+    masks = {tag: mask for tag, mask in zip(tags, rejected, strict=True) if tag is not None}
+    seen = dict.fromkeys(masks, 0)
+    marked = []
+    for line in lines:
+        tag = line.split(" ", 1)[0]
+        if tag in masks:
+            if masks[tag][seen[tag]]:
+                line = REJECTED_PREFIX + line
+            seen[tag] += 1
+        marked.append(line)
+    return marked
+
+
 @paused_garbage_collection()
 def format_g2o(
-    graph: PoseGraph, g2o_rotation_information: bool = False, sim3_dialect: str = "a"
+    graph: PoseGraph,
+    g2o_rotation_information: bool = False,
+    sim3_dialect: str = "a",
+    rejected: Rejected | None = None,
 ) -> str:
-    """The graph as g2o text (VERTEX/EDGE lines of its group, priors, then FIX lines)."""
+    """The graph as g2o text (VERTEX/EDGE lines of its group, priors, then FIX lines); the
+    ``rejected`` edges and priors marked as such (``_marked``)."""
     _refuse_unwritable(graph, "g2o")
     ids, edges, priors = graph.node_ids, graph.edges, graph.priors
     i, j = ids[edges.i], ids[edges.j]
@@ -157,6 +190,7 @@ def format_g2o(
             "EDGE_SIM3:EXPMAP", [i, j], np.hstack([_sim3_numbers(measured, sim3_dialect), info])
         )
     lines += [f"FIX {k}" for k in ids[graph.fixed].tolist()]
+    lines = _marked(lines, rejected, MEASUREMENT_TAGS["g2o"][graph.group])
     return "\n".join(lines) + "\n"
 
 
@@ -191,8 +225,9 @@ def _refuse_unwritable(graph: PoseGraph, file_format: str) -> None:
 
 
 @paused_garbage_collection()
-def format_toro(graph: PoseGraph) -> str:
-    """The graph as TORO text (VERTEX2/EDGE2 or VERTEX3/EDGE3, then EQUIV lines)."""
+def format_toro(graph: PoseGraph, rejected: Rejected | None = None) -> str:
+    """The graph as TORO text (VERTEX2/EDGE2 or VERTEX3/EDGE3, then EQUIV lines); the
+    ``rejected`` edges marked as such (``_marked``)."""
     _refuse_unwritable(graph, "toro")
     ids, edges = graph.node_ids, graph.edges
     i, j = ids[edges.i], ids[edges.j]
@@ -207,6 +242,7 @@ def format_toro(graph: PoseGraph) -> str:
             "EDGE3", [i, j], np.hstack([_pose_numbers(edges.measurements, False), info])
         )
     lines += [f"EQUIV {a} {b}" for a, b in graph.equivalences.tolist()]
+    lines = _marked(lines, rejected, MEASUREMENT_TAGS["toro"][graph.group])
     return "\n".join(lines) + "\n"
 
 
@@ -216,9 +252,12 @@ def write_graph(
     file_format: str | None = None,
     g2o_rotation_information: bool = False,
     sim3_dialect: str = "a",
+    rejected: Rejected | None = None,
 ) -> None:
     """Write atomically; the format is "g2o" or "toro", or told by the suffix (.g2o; .graph or
-    .toro). A path whose suffix tells neither is refused unless the format is given."""
+    .toro). A path whose suffix tells neither is refused unless the format is given. The
+    ``rejected`` edges and priors (masks) are written commented out behind
+    ``REJECTED_PREFIX``: g2o and gtsam leave them out, posegraph reads them back as rejected."""
     refuse_non_finite(path, graph.node_ids, graph.values)
     if file_format is None:
         file_format = GRAPH_SUFFIXES.get(Path(path).suffix.lower())
@@ -231,7 +270,7 @@ def write_graph(
         raise ValueError(f"unknown graph format {file_format!r}; use 'g2o' or 'toro'")
     with written_finite(path):
         if file_format == "toro":
-            text = format_toro(graph)
+            text = format_toro(graph, rejected)
         else:
-            text = format_g2o(graph, g2o_rotation_information, sim3_dialect)
+            text = format_g2o(graph, g2o_rotation_information, sim3_dialect, rejected)
     atomic_write_text(path, text)

@@ -19,7 +19,8 @@ from ..io.test_malformed import write_case
 def test_numbers_that_overflow_are_reported_and_nothing_is_written(tmp_path):
     """A vertex at 1e200: its edges' errors overflow at the file's values. ``info`` said
     "initial error inf" with exit 0 and ``optimize --init file`` stopped after the read; now
-    the first such edge is refused on its line, and ``--lenient`` leaves those edges out."""
+    the first such edge is refused on its line, and ``--lenient`` (and ``info``) leave those
+    edges out."""
     lines = open(EXAMPLE_2D).read().splitlines()
     vertex = next(k for k, line in enumerate(lines) if line.startswith("VERTEX_SE2 5 "))
     fields = lines[vertex].split()
@@ -30,11 +31,16 @@ def test_numbers_that_overflow_are_reported_and_nothing_is_written(tmp_path):
     first_edge = next(
         k + 1 for k, line in enumerate(lines) if line.startswith(("EDGE_SE2 5 ", "EDGE_SE2 4 5 "))
     )
-    for command in (["optimize", huge, "-o", out, "--init", "file"], ["info", huge]):
-        failed = run(*command, check_exit=2)
-        assert failed.stderr.startswith(f"posegraph: error: {huge}:{first_edge}: EDGE_SE2: its")
-        assert "error at the file's values overflows" in failed.stderr
-        assert len(failed.stderr.splitlines()) == 1 and not out.exists()
+    failed = run("optimize", huge, "-o", out, "--init", "file", check_exit=2)
+    assert failed.stderr.startswith(f"posegraph: error: {huge}:{first_edge}: EDGE_SE2: its")
+    assert "error at the file's values overflows" in failed.stderr
+    assert len(failed.stderr.splitlines()) == 1 and not out.exists()
+    diagnosis = run_json("info", huge)  # lenient: the edges are a problem it lists
+    assert np.isfinite(diagnosis["initial_error"])
+    assert any(
+        p["what"].startswith(f"3 line(s) skipped (first at line {first_edge})")
+        for p in diagnosis["problems"]
+    )
     document = run_json("optimize", huge, "--lenient", "-o", out, check_exit=None)
     skipped = document["skipped_lines"][0]
     assert skipped["first_line"] == first_edge and skipped["count"] == 3
@@ -118,7 +124,7 @@ def test_with_json_a_stop_is_a_document_on_stdout_too(tmp_path, monkeypatch, cap
         raise RuntimeError("first line")
 
     cases = [
-        (["info", str(bad)], "bad_input", 2, str(bad), 2),
+        (["optimize", str(bad)], "bad_input", 2, str(bad), 2),
         (["optimize", str(unreadable)], "bad_input", 2, str(unreadable), None),
         (["optimize", EXAMPLE, "-o", EXAMPLE], "bad_input", 2, EXAMPLE, None),
         (["plot", EXAMPLE, "-o", str(nowhere)], "bad_input", 2, str(nowhere), None),
@@ -169,17 +175,30 @@ def test_malformed_input_gives_one_line_and_exit_2(tmp_path, name, content, line
     assert not (tmp_path / "out.g2o").exists()
 
 
-@pytest.mark.parametrize("command", ["info", "convert", "plot"])
+@pytest.mark.parametrize("command", ["convert", "plot"])
 @pytest.mark.parametrize("case", [0, 3, 7, 11, 13, 17], ids=lambda k: MALFORMED[k][0])
 def test_malformed_input_for_other_commands(tmp_path, command, case):
     name, content, _, words = MALFORMED[case]
     path = write_case(tmp_path, name, content)
-    extra = {"info": [], "convert": [tmp_path / "o.graph"], "plot": ["-o", tmp_path / "o.png"]}[
-        command
-    ]
+    extra = {"convert": [tmp_path / "o.graph"], "plot": ["-o", tmp_path / "o.png"]}[command]
     completed = run(command, path, *extra, check_exit=2)
     assert completed.stderr.count("\n") == 1 and words in completed.stderr
     assert "Traceback" not in completed.stderr
+
+
+@pytest.mark.parametrize("case", [0, 3, 7, 11, 13, 17], ids=lambda k: MALFORMED[k][0])
+def test_info_lists_what_other_commands_refuse(tmp_path, case):
+    """``info`` reads leniently: a bad line is a problem it lists, with its line; only a file
+    with nothing readable stops it (one line, exit 2)."""
+    name, content, line, words = MALFORMED[case]
+    path = write_case(tmp_path, name, content)
+    completed = run("info", path, "--json", check_exit=None)
+    if completed.returncode == 0:
+        problems = " | ".join(p["what"] for p in json.loads(completed.stdout)["problems"])
+        assert words in problems and f"(first at line {line})" in problems
+    else:
+        assert completed.returncode == 2 and completed.stderr.count("\n") == 1
+        assert words in completed.stderr and "Traceback" not in completed.stderr
 
 
 def test_debug_shows_the_traceback(tmp_path):

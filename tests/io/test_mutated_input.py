@@ -11,6 +11,7 @@ import pytest
 
 import posegraph
 from posegraph.io import GraphFileError, ReadOptions, read_graph
+from posegraph.io.parsing import REJECTED_PREFIX
 from tests.soak.soak import GRAPH_FILES
 
 hypothesis = pytest.importorskip("hypothesis")
@@ -61,11 +62,15 @@ def mutated_files(draw) -> tuple[str, str]:
 @pytest.mark.parametrize("name", sorted(VALID_FILES))
 def test_the_files_before_damage_read(tmp_path, name):
     """The mutations start from files that read, with every line (a comment holding a form
-    feed or U+2028 is one line)."""
+    feed or U+2028 is one line; a line marked rejected is read, as rejected)."""
     path = tmp_path / name
     path.write_text(VALID_FILES[name])
     result = read_graph(str(path))
-    tagged = [line for line in VALID_FILES[name].split("\n") if line[:1].isalpha()]
+    tagged = [
+        line
+        for line in VALID_FILES[name].split("\n")
+        if line[:1].isalpha() or line.startswith(REJECTED_PREFIX)
+    ]
     assert sum(result.tag_counts.values()) == len(tagged)
     assert result.graph.num_edges > 0
 

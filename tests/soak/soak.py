@@ -53,6 +53,7 @@ EDGE_SE2 0 1 1 0 0.1 {INFO_SE2}
 EDGE_SE2 1 2 1 0.1 0.1 {INFO_SE2}
 EDGE_SE2 2 3 1 0 1.5 {INFO_SE2}
 EDGE_SE2 3 0 2 1 1.6 100 1 0 100 0 1000
+# posegraph:rejected EDGE_SE2 0 2 5 5 1 {INFO_SE2}
 EDGE_PRIOR_SE2 0 0 0 0 10 0 0 10 0 10
 FIX 0
 """,
@@ -101,7 +102,7 @@ EDGE3 1 0 -1 0 0 0 0 -0.1 {INFO_TORO3}
 """,
 }
 """Small valid graph files of every tag and dialect (a comment holds characters that
-``str.splitlines`` would end a line at)."""
+``str.splitlines`` would end a line at; a line is marked rejected)."""
 
 TRAJECTORY_FILES = {
     "poses.tum": """# timestamp tx ty tz qx qy qz qw \v (a vertical tab in a comment)
