@@ -80,18 +80,25 @@ def test_the_writer_checks_the_numbers_it_formats(tmp_path):
     assert not path.exists()
 
 
+def _refused_line(tmp_path, text: str, match: str) -> int:
+    """The line that strict reading names, refusing ``text`` (written to refused.g2o) with
+    ``match``."""
+    path = tmp_path / "refused.g2o"
+    path.write_text(text)
+    with pytest.raises(GraphFileError, match=match) as raised:
+        read_graph(str(path))
+    return raised.value.line
+
+
 def test_a_prior_whose_numbers_overflow_is_refused_naming_its_line(tmp_path):
     """Edges had this check; priors surfaced the overflow later, with no line, or as an
     "initial error inf" with exit 0."""
-    path = tmp_path / "prior.g2o"
-    path.write_text(
+    text = (
         "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\n"
         "EDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\n"
         "EDGE_PRIOR_SE2 1 1e200 0 0 1 0 0 1 0 1\n"
     )
-    with pytest.raises(GraphFileError, match="the prior's translation weighed by") as raised:
-        read_graph(str(path))
-    assert raised.value.line == 4
+    assert _refused_line(tmp_path, text, "the prior's translation weighed by") == 4
     graph = PoseGraph(SE2)
     graph.add_nodes([0], SE2.identity((1,)))
     with pytest.raises(ValueError, match="the prior on node 0: its translation weighed"):
@@ -117,16 +124,13 @@ def test_lenient_reading_skips_a_stray_line_of_another_group(tmp_path):
 def test_an_edge_whose_error_at_the_file_values_overflows_is_refused(tmp_path):
     """A vertex at 1e200 is finite, but its edges' errors overflow: ``info`` said "initial
     error inf" with exit 0. The edge is refused naming its line; lenient reading skips it."""
-    path = tmp_path / "far.g2o"
-    path.write_text(
+    text = (
         "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1e200 0 0\nVERTEX_SE2 2 2 0 0\n"
         "EDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\n"
         "EDGE_SE2 0 2 2 0 0 1 0 0 1 0 1\n"
     )
-    with pytest.raises(GraphFileError, match="its error at the file's values overflows") as raised:
-        read_graph(str(path))
-    assert raised.value.line == 4
-    read = read_graph(str(path), ReadOptions(lenient=True))
+    assert _refused_line(tmp_path, text, "its error at the file's values overflows") == 4
+    read = read_graph(str(tmp_path / "refused.g2o"), ReadOptions(lenient=True))
     assert [line for line, _ in read.skipped] == [4] and read.graph.num_edges == 1
     graph = read.graph
     assert np.isfinite(chi2(graph.values, graph.edges, graph.priors))
