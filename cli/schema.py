@@ -222,10 +222,31 @@ SCHEMAS = {
             "lifted_scale_information",
             "repaired_information",
             "rotation_information",
+            "noise",
             "skipped_lines",
         ],
         "properties": {
             "command": {"const": "info"},
+            "noise": {
+                "type": "array",
+                "items": {
+                    "type": "object",
+                    "required": [
+                        "kind",
+                        "count",
+                        "redundancy",
+                        "chi2_per_dof",
+                        "above_quantile",
+                    ],
+                    "properties": {
+                        "kind": {"enum": ["odometry", "loop closures", "priors"]},
+                        "count": {"type": "integer", "minimum": 1},
+                        "redundancy": _NUMBER,
+                        "chi2_per_dof": {"type": ["number", "null"]},
+                        "above_quantile": {"type": "integer", "minimum": 0},
+                    },
+                },
+            },
             "skipped_lines": _SKIPPED_LINES,
             "file_format": {"enum": ["g2o", "toro"]},
             "tag_counts": {"type": "object", "additionalProperties": {"type": "integer"}},

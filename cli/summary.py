@@ -226,6 +226,14 @@ def format_diagnosis(d: Diagnosis, reading: dict | None = None) -> str:
         lines.append(f"  information     {'; '.join(kinds)}")
     lines.extend(_lifted_lines(d.lifted_scale_information))
     lines.append(f"  initial error   {d.initial_error:.10g} (½Σrᵀ Ω r), chi2 {d.initial_chi2:.10g}")
+    if d.noise:
+        classes = ", ".join(
+            f"{c.kind} {c.chi2_per_dof:.3g} ({c.above_quantile} fail χ²(0.999))"
+            if c.chi2_per_dof is not None
+            else f"{c.kind} not redundant"
+            for c in d.noise
+        )
+        lines.append(f"  noise           χ² per dof at the least-squares optimum: {classes}")
     if d.problems:
         lines.append(f"  problems        {len(d.problems)}")
         for problem in d.problems:

@@ -13,8 +13,10 @@ import dataclasses
 
 import numpy as np
 
+from ..api import optimize
 from ..graph import PoseGraph, odometry_mask
 from ..io.reader import ReadResult
+from ..problem.cholesky import NotPositiveDefinite
 from ..problem.factors import chi2
 from ..problem.observability import (
     describe_moving,
@@ -22,6 +24,7 @@ from ..problem.observability import (
     undetermined_direction,
     unmeasured_directions,
 )
+from .noise import NoiseClass, noise_consistency
 
 CONDITION_LIMIT = 1e12
 
@@ -59,10 +62,14 @@ class Diagnosis:
     lifted_scale_information: float | None
     """The log-scale information of the SE3 lines lifted to Sim3 in a file mixing both (None if
     nothing was lifted): ``ReadResult.lifted_scale_information``."""
+    noise: list[NoiseClass]
+    """Noise consistency per class of measurement at a least-squares solution
+    (``noise.noise_consistency``); empty where no solve could be made."""
 
     def as_dict(self) -> dict:
         record = dataclasses.asdict(self)
         record["problems"] = [dataclasses.asdict(p) for p in self.problems]
+        record["noise"] = [c.as_dict() for c in self.noise]
         return record
 
 
@@ -77,6 +84,7 @@ def diagnose(read: ReadResult) -> Diagnosis:
     conditions, condition_problems = _conditions(information, eigenvalues[~singular])
     with np.errstate(over="ignore", invalid="ignore"):
         total = chi2(graph.values, graph.edges, graph.priors)
+    noise = _noise(graph)
     problems = [
         *_component_problems(sizes),
         *_singular_problems(int(np.count_nonzero(singular[: graph.num_edges]))),
@@ -85,6 +93,7 @@ def diagnose(read: ReadResult) -> Diagnosis:
         *_edge_problems(graph),
         *_reading_problems(read),
         *_error_problems(total),
+        *[Problem(*c.finding()) for c in noise if c.finding()],
     ]
     return Diagnosis(
         path=read.path,
@@ -103,7 +112,20 @@ def diagnose(read: ReadResult) -> Diagnosis:
         initial_chi2=total,
         problems=problems,
         lifted_scale_information=read.lifted_scale_information,
+        noise=noise,
     )
+
+
+def _noise(graph: PoseGraph) -> list[NoiseClass]:
+    """Noise consistency at a least-squares solution of a copy of the graph (none if the graph
+    has no measurement or the solve fails: the other problems say why)."""
+    if not graph.num_edges and not len(graph.priors):
+        return []
+    try:
+        solved = optimize(graph.copy()).values
+        return noise_consistency(graph, solved)
+    except (ValueError, np.linalg.LinAlgError, NotPositiveDefinite):
+        return []
 
 
 def _component_problems(sizes: list[int]) -> list[Problem]:

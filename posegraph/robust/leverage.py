@@ -166,6 +166,9 @@ class DeletedResiduals:
     is exact: its eigenvalues lie in [0, 1])."""
     exact: bool
     """Whether Mₑₑ was exact, or estimated from probes."""
+    redundancy: np.ndarray
+    """tr(I − Mₑₑ), the edge's redundancy number: the expected s = rᵀΩr at the solution when
+    the information states the noise right (0 for an edge that nothing else measures)."""
 
 
 class Leverage:
@@ -252,6 +255,7 @@ def _deleted(whitened: np.ndarray, hat: np.ndarray, exact: bool) -> DeletedResid
         (projected**2 / eigenvalues).sum(axis=1),
         (projected**2 / eigenvalues**2).sum(axis=1),
         exact,
+        (eigenvalues * (eigenvalues > SMALLEST_COMPLEMENT)).sum(axis=1),
     )
 
 

@@ -5,11 +5,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from posegraph_datasets.generators import manhattan_world
 from posegraph_datasets.monocular import monocular_sequence, write_sequence
 from posegraph_datasets.outliers import add_false_loops
 from posegraph_datasets.paths import BENCHMARK_GRAPHS
 
-from posegraph.io import read_graph
+from posegraph.graph import EdgeSet
+from posegraph.io import read_graph, write_graph
 from posegraph.robust.spec import robust_mask
 from tests.cli.helpers import (
     EXAMPLE,
@@ -503,3 +505,25 @@ def test_info_reads_leniently_and_names_the_repair(tmp_path):
     assert "rotation info   over φ, as gtsam reads it" in text
     g2o = run_json("optimize", source, "--repair-information", "psd", "--g2o-rotation-information")
     assert g2o["rotation_information"] == "quaternion"
+
+
+def test_info_names_false_loops_and_misstated_information(tmp_path):
+    """``info`` solves in least squares and tests the noise: false loops, and information
+    scaled 1e4× from the noise, are named with the option, in text and --json."""
+    graph, _ = manhattan_world(400, seed=5)
+    corrupted, _ = add_false_loops(graph, 0.1, seed=1)
+    scaled = graph.copy()
+    edges = scaled.edges
+    scaled.edges = EdgeSet(edges.i, edges.j, edges.measurements, edges.information * 1e4)
+    for name, noisy, words, option in [
+        ("false_loops.g2o", corrupted, "likely false loops", "--robust gnc"),
+        ("scaled.g2o", scaled, "understates their noise about", "--robust gnc"),
+    ]:
+        path = tmp_path / name
+        write_graph(noisy, str(path))
+        document = run_json("info", path)
+        problems = [p for p in document["problems"] if words in p["what"]]
+        assert problems and option in problems[0]["suggestion"], document["problems"]
+        assert {c["kind"] for c in document["noise"]} == {"odometry", "loop closures"}
+        text = run("info", path).stdout
+        assert words in text and "noise           χ² per dof" in text
