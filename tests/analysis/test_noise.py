@@ -3,7 +3,6 @@ simulated noise, and names information scaled away from it and false loops."""
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 from posegraph_datasets.generators import manhattan_world
 from posegraph_datasets.outliers import add_false_loops
