@@ -24,6 +24,10 @@ OFF_BY = 10.0
 """A class whose Σ s / Σ redundancy is beyond this factor either way is named: its
 information misstates its noise."""
 
+NOISE_FREE = 1e-12
+"""Below this χ² per degree of freedom the residuals are rounding: a file made without noise,
+whose information cannot be tested."""
+
 FALSE_SHARE = 0.01
 """Loop closures failing the test beyond this share of them (ten times the test's own rate)
 are named as likely false."""
@@ -41,30 +45,30 @@ class NoiseClass:
     above_quantile: int
 
     def finding(self) -> tuple[str, str] | None:
-        """(what a user should hear about this class, what to do), if anything."""
+        """(what a user should hear about this class, what to do), if anything. Residuals
+        below ``NOISE_FREE`` per degree of freedom (a file made without noise) say nothing."""
         ratio = self.chi2_per_dof
-        measured = f"χ² per degree of freedom {ratio:.3g}, 1 when it is right" if ratio else ""
-        if ratio is not None and ratio < 1 / OFF_BY:
-            return (
-                f"the information of the {self.kind} overstates their noise about"
-                f" {1 / ratio:.2g}× ({measured})",
-                "a robust kernel's default width then keeps false measurements: narrow it"
-                f" (--robust gnc:{default_width(3) * np.sqrt(ratio):.2g} for 3 degrees of"
-                " freedom) or scale the information",
-            )
         if self.kind == "loop closures" and self.above_quantile > max(1, FALSE_SHARE * self.count):
             return (
                 f"{self.above_quantile} of {self.count} loop closures fail the χ²({QUANTILE})"
                 " test against the solution without them: likely false loops",
                 "try --robust gnc",
             )
-        if ratio is not None and ratio > OFF_BY:
+        if ratio is None or ratio < NOISE_FREE or 1 / OFF_BY <= ratio <= OFF_BY:
+            return None
+        measured = f"χ² per degree of freedom {ratio:.3g}, 1 when it is right"
+        if ratio < 1 / OFF_BY:
             return (
-                f"the information of the {self.kind} understates their noise about {ratio:.2g}×"
-                f" ({measured}), or some are false",
-                "try --robust gnc; if the residuals are all alike, scale the information",
+                f"the information of the {self.kind} overstates their noise about"
+                f" {1 / ratio:.2g}× ({measured})",
+                "a robust kernel's default width then keeps false measurements: narrow it"
+                f" about {np.sqrt(1 / ratio):.2g}× (--robust gnc:WIDTH) or scale the information",
             )
-        return None
+        return (
+            f"the information of the {self.kind} understates their noise about {ratio:.2g}×"
+            f" ({measured}), or some are false",
+            "try --robust gnc; if the residuals are all alike, scale the information",
+        )
 
     def as_dict(self) -> dict:
         return dataclasses.asdict(self)

@@ -42,7 +42,17 @@ def test_scaled_information_is_named_with_its_factor(simulated):
         what, suggestion = noise_class.finding()
         assert f"the information of the {noise_class.kind} overstates their noise about" in what
         assert 9e3 < 1 / noise_class.chi2_per_dof < 1.1e4
-        assert "--robust gnc:" in suggestion
+        assert "--robust gnc:WIDTH" in suggestion
+
+
+def test_noise_free_measurements_are_not_a_finding(simulated):
+    """Residuals of exactly 0 (a file made without noise) say nothing of the information."""
+    graph, values = simulated
+    exact = graph.copy()
+    relative = values[exact.edges.i].between(values[exact.edges.j])
+    exact.edges = EdgeSet(exact.edges.i, exact.edges.j, relative, exact.edges.information)
+    classes = noise_consistency(exact, values)
+    assert all(c.chi2_per_dof < 1e-20 and c.finding() is None for c in classes)
 
 
 def test_false_loops_are_named(simulated):
