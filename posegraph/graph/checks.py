@@ -112,13 +112,13 @@ def overflowing_edges(measurements: LieGroup, information: np.ndarray) -> np.nda
         return ~np.isfinite(start_information(measurements, information)).all(axis=(1, 2))
 
 
-def refuse_overflowing(i_ids: np.ndarray, j_ids: np.ndarray, new, kind: str) -> None:
-    """Refuse measurements (an ``EdgeSet`` of ``kind`` "edge" or "prior", on nodes ``i_ids``
-    and ``j_ids``) whose translation weighed by their information overflows
+def refuse_overflowing(new, kind: str, node_id: Callable[[int], int]) -> None:
+    """Refuse measurements (an ``EdgeSet`` of ``kind`` "edge" or "prior"; ``node_id`` names a
+    node by its index) whose translation weighed by their information overflows
     (``overflowing_edges``)."""
     overflowing = np.flatnonzero(overflowing_edges(new.measurements, new.information))
     if overflowing.size:
-        i, j = i_ids[overflowing[0]], j_ids[overflowing[0]]
+        i, j = node_id(new.i[overflowing[0]]), node_id(new.j[overflowing[0]])
         which = f"the edge {i} → {j}" if kind == "edge" else f"the prior on node {i}"
         raise ValueError(
             f"{which}: its translation weighed by its information overflows "

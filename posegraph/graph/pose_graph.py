@@ -199,11 +199,14 @@ class PoseGraph:
         new = self._edge_set(i_ids, j_ids, measurements, information)
         if np.any(new.i == new.j):
             raise ValueError(f"self-loop on node {self.node_ids[new.i[new.i == new.j][0]]}")
-        refuse_overflowing(self.node_ids[new.i], self.node_ids[new.j], new, "edge")
+        refuse_overflowing(new, "edge", self._node_id)
         start = self.num_edges
         self._stacks["edges"].append(new)
         self.structure_version += 1
         return np.arange(start, start + len(new))
+
+    def _node_id(self, index: int) -> int:
+        return int(self.node_ids[index])
 
     def add_edge(self, i_id: int, j_id: int, measurement, information) -> int:
         """Add one between edge (see ``add_edges``); returns its index."""
@@ -212,7 +215,7 @@ class PoseGraph:
     def add_priors(self, node_ids, measurements, information) -> np.ndarray:
         """Add priors Z ≈ Xᵢ; returns their prior indices."""
         new = self._edge_set(node_ids, None, measurements, information)
-        refuse_overflowing(self.node_ids[new.i], self.node_ids[new.j], new, "prior")
+        refuse_overflowing(new, "prior", self._node_id)
         start = self._stacks["priors"].length
         self._stacks["priors"].append(new)
         self.structure_version += 1
