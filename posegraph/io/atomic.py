@@ -43,9 +43,10 @@ def is_special(path: str | os.PathLike) -> bool:
     """Whether ``path`` (its symlinks followed) exists and is not a regular file: a device, a
     FIFO or a socket, which a write goes through to and a rename would replace."""
     try:
-        return not stat.S_ISREG(os.stat(path).st_mode) and not os.path.isdir(path)
+        mode = os.stat(path).st_mode
     except OSError:
         return False
+    return not (stat.S_ISREG(mode) or stat.S_ISDIR(mode))
 
 
 def _failed(error: OSError, target: Path) -> OSError:
@@ -127,16 +128,16 @@ def output_batch() -> Iterator[OutputBatch]:
     try:
         yield batch
     except KeyboardInterrupt:
-        _BATCH.reset(token)
         if not batch.staged:
             raise
         raise InterruptedAfterWriting(batch.commit()) from None
     except BaseException:
-        _BATCH.reset(token)
         batch.discard()
         raise
-    _BATCH.reset(token)
-    batch.commit()
+    else:
+        batch.commit()
+    finally:
+        _BATCH.reset(token)
 
 
 @contextmanager

@@ -123,10 +123,10 @@ def lift_se3_lines(
     check_scale_information(scale_information)
     lifted = graph.edges.subset(edges)
     if scale_information is None:
-        ids, loops = graph.node_ids, graph.edges.subset(~edges)
-        sigma = loop_scale_sigma(
-            np.stack([ids[lifted.i], ids[lifted.j]], axis=1),
-            np.stack([ids[loops.i], ids[loops.j]], axis=1),
+        loops = graph.edges.subset(~edges)
+        sigma = loop_scale_sigma(  # node indices serve as the ids
+            np.stack([lifted.i, lifted.j], axis=1),
+            np.stack([loops.i, loops.j], axis=1),
             loops.measurements.scale,
         )
         odometry = lifted.measurements
