@@ -4,6 +4,7 @@ has its own module); each reads its inputs, calls one library function, and prin
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import os
@@ -19,6 +20,7 @@ from posegraph.io.conversion import convert as convert_graph
 from posegraph.io.conversion import output_format
 from posegraph.io.covariances import write_covariances
 from posegraph.problem.cholesky import NotPositiveDefinite
+from posegraph.robust.calibration import kept_noise
 from posegraph.solvers import Summary
 from posegraph.trajectory.evaluation import evaluate
 
@@ -64,9 +66,12 @@ def optimize(args: argparse.Namespace) -> int:
     smoother = posegraph.Smoother(graph)
     with Progress(talks(args), args.solver) as progress:
         with about(args.input):  # values the initialisation cannot hold, say
-            result = smoother.optimize(callback=progress, **solving)
+            result = smoother.optimize(
+                callback=progress, calibrate_noise=args.calibrate_noise or None, **solving
+            )
     summary = noting_interruption(progress, result.summary)
     _refuse_non_finite(summary, args.input)
+    summary = _with_noise(graph, result, summary)
     wrote = _write_optimised(args, read, smoother, before, kept)
     record = {
         "command": "optimize",
@@ -88,6 +93,18 @@ def optimize(args: argparse.Namespace) -> int:
     )
     emit(args, record, text, inputs.warnings)
     return EXIT_OK if summary.converged else EXIT_NOT_CONVERGED
+
+
+def _with_noise(graph: posegraph.PoseGraph, result: posegraph.Result, summary: Summary) -> Summary:
+    """The summary with the noise check of the measurements kept, where the run made none
+    (nor where it was stopped, or the solution has no covariance)."""
+    if summary.noise or not summary.converged:
+        return summary
+    try:
+        noise = kept_noise(graph, result)
+    except (np.linalg.LinAlgError, NotPositiveDefinite, ValueError):
+        return summary
+    return dataclasses.replace(summary, noise=[c.as_dict() for c in noise])
 
 
 def _refuse_non_finite(summary: Summary, source: str) -> None:

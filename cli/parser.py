@@ -208,6 +208,14 @@ def _optimize(sub, groups: _Groups) -> None:
     )
     opt.add_argument("--plot", metavar="FIG.png", help="before/after figure")
     opt.add_argument(
+        "--calibrate-noise",
+        action="store_true",
+        help="scale each class's information (odometry, loops, priors) to its inliers' residuals"
+        " and solve again; --robust gnc does so where it kept gross outliers (measurements that"
+        " fail the chi2 test tenfold under the noise the residuals show). -o's graph holds the"
+        " scaled information",
+    )
+    opt.add_argument(
         "--overwrite",
         action="store_true",
         help="allow -o or --covariances to be the input file",

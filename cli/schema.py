@@ -41,6 +41,22 @@ _SKIPPED_LINES = {
 }
 """What ``--lenient`` reading skipped, by file and reason, most frequent first; empty if nothing."""
 
+NOISE = {
+    "type": "array",
+    "items": {
+        "type": "object",
+        "required": ["kind", "count", "redundancy", "chi2_per_dof", "above_quantile"],
+        "properties": {
+            "kind": {"enum": ["odometry", "loop closures", "priors"]},
+            "count": {"type": "integer", "minimum": 1},
+            "redundancy": _NUMBER,
+            "chi2_per_dof": {"type": ["number", "null"]},
+            "above_quantile": {"type": "integer", "minimum": 0},
+        },
+    },
+}
+"""Noise consistency per class of measurement (``posegraph.robust.noise.NoiseClass``)."""
+
 SUMMARY = {
     "type": "object",
     "required": [
@@ -87,6 +103,16 @@ SUMMARY = {
         "rejected_priors": {"type": "array", "items": {"type": "integer"}},
         "edges_under_kernel": {"type": "integer", "minimum": 0},
         "priors_under_kernel": {"type": "integer", "minimum": 0},
+        "noise": NOISE,
+        "calibration": {
+            "type": ["object", "null"],
+            "required": ["scales", "automatic", "solves"],
+            "properties": {
+                "scales": {"type": "object", "additionalProperties": _NUMBER},
+                "automatic": {"type": "boolean"},
+                "solves": {"type": "integer", "minimum": 0},
+            },
+        },
         "history": {
             "type": "array",
             "items": {
@@ -227,26 +253,7 @@ SCHEMAS = {
         ],
         "properties": {
             "command": {"const": "info"},
-            "noise": {
-                "type": "array",
-                "items": {
-                    "type": "object",
-                    "required": [
-                        "kind",
-                        "count",
-                        "redundancy",
-                        "chi2_per_dof",
-                        "above_quantile",
-                    ],
-                    "properties": {
-                        "kind": {"enum": ["odometry", "loop closures", "priors"]},
-                        "count": {"type": "integer", "minimum": 1},
-                        "redundancy": _NUMBER,
-                        "chi2_per_dof": {"type": ["number", "null"]},
-                        "above_quantile": {"type": "integer", "minimum": 0},
-                    },
-                },
-            },
+            "noise": NOISE,
             "skipped_lines": _SKIPPED_LINES,
             "file_format": {"enum": ["g2o", "toro"]},
             "tag_counts": {"type": "object", "additionalProperties": {"type": "integer"}},

@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING
 
 from posegraph.analysis.doctor import Diagnosis
 from posegraph.graph import PoseGraph
+from posegraph.robust.noise import NoiseClass
 from posegraph.solvers import MAX_ITERATIONS, Summary
 from posegraph.trajectory.evaluation import Evaluation
 
@@ -55,9 +56,37 @@ def format_summary(
         f"  time            {summary.total_time:.3f} s: "
         + ", ".join(f"{name} {seconds:.3f}" for name, seconds in phases.items()),
         *_robust_lines(graph, summary, lifted_scale_information),
+        *_noise_lines(summary),
         *_written_lines(written),
     ]
     return "\n".join(lines)
+
+
+def _noise_lines(summary: Summary) -> list[str]:
+    """The noise check of the measurements kept (χ² per redundant degree of freedom, per
+    class), what it finds, and what calibration did; nothing where no check was made."""
+    if not summary.noise:
+        return []
+    classes = [NoiseClass(**c) for c in summary.noise]
+    ratios = ", ".join(
+        f"{c.kind} {c.chi2_per_dof:.3g}" for c in classes if c.chi2_per_dof is not None
+    )
+    lines = [f"  noise           χ² per redundant dof {ratios} (1 when the information is right)"]
+    for finding in filter(None, (c.finding(robust=bool(summary.robust)) for c in classes)):
+        lines.append(f"  {'':<15} {finding[0]}; {finding[1]}")
+    calibration = summary.calibration
+    if calibration is not None:
+        scales = ", ".join(f"{kind} ×{scale:.3g}" for kind, scale in calibration["scales"].items())
+        why = (
+            "GNC kept gross outliers under the noise the residuals show"
+            if calibration["automatic"]
+            else "--calibrate-noise"
+        )
+        lines.append(
+            f"  calibrated      information {scales} ({why}; {_solves(calibration['solves'])}"
+            "); the output holds it so"
+        )
+    return lines
 
 
 def format_scale_drift(
@@ -281,3 +310,7 @@ def _lengths(lengths: tuple[float, ...]) -> str:
     """ "100–800" of the segment lengths, or the one length."""
     low, high = min(lengths), max(lengths)
     return f"{low:g}" if low == high else f"{low:g}–{high:g}"
+
+
+def _solves(count: int) -> str:
+    return f"{count} more solve{'' if count == 1 else 's'}"

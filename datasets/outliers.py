@@ -3,7 +3,10 @@
 ``add_false_loops`` joins random pairs of non-consecutive nodes with edges whose measurement is
 a random relative pose (uniform rotation; translation uniform within the extent of the graph's
 own edge translations) and whose information is copied from a random true edge, so that
-nothing but their inconsistency gives them away.
+nothing but their inconsistency gives them away. ``add_false_loops_anywhere`` draws them
+otherwise, as a place recognition that matched the wrong place would: half between nearby
+nodes (2 to ``NEARBY`` ids apart), half between distant ones, each a random relative pose
+anywhere within the map's extent, with the information of one of the file's own loops.
 
 ``add_fixes`` adds absolute pose fixes (priors, as from GNSS with a heading) around the true
 poses, of which a share are false: a random pose within the extent of the true positions, with
@@ -36,6 +39,49 @@ def add_false_loops(graph: PoseGraph, fraction: float, seed: int) -> tuple[PoseG
     extent = np.abs(graph.edges.measurements.translation).max(axis=0)
     measurements = _random_poses(graph.group, rng, i.size, -extent, extent)
     information = graph.edges.information[rng.integers(0, graph.num_edges, size=i.size)]
+    return _with_false_edges(graph, i, j, measurements, information)
+
+
+NEARBY = 20
+"""``add_false_loops_anywhere``'s nearby pairs are at most this many ids apart; its distant
+ones at least this many."""
+
+
+def add_false_loops_anywhere(
+    graph: PoseGraph, fraction: float, seed: int
+) -> tuple[PoseGraph, np.ndarray]:
+    """A copy of ``graph`` in which false loops make up ``fraction`` of all loop closures, and
+    their mask: half between nodes 2 to ``NEARBY`` ids apart, half between nodes at least
+    ``NEARBY`` apart; each a random relative pose (uniform rotation, translation uniform within
+    ± the extent of the graph's positions) with the information of a random loop of the graph
+    (of a random edge where it has none). The graph must have values."""
+    _check_fraction(fraction)
+    rng = np.random.default_rng(seed)
+    loops = ~odometry_mask(graph)
+    count = int(round(fraction / (1.0 - fraction) * loops.sum()))
+    n = graph.num_nodes
+    nearby = count // 2
+    i_near = rng.integers(0, n, size=nearby)
+    j_near = i_near + rng.integers(2, NEARBY + 1, size=nearby) * rng.choice([-1, 1], size=nearby)
+    i_near, j_near = i_near[(j_near >= 0) & (j_near < n)], j_near[(j_near >= 0) & (j_near < n)]
+    i_far = rng.integers(0, n, size=8 * (count - i_near.size) + 16)
+    j_far = rng.integers(0, n, size=i_far.size)
+    far = np.abs(i_far - j_far) >= NEARBY
+    distant = count - i_near.size
+    i = np.concatenate([i_near, i_far[far][:distant]])
+    j = np.concatenate([j_near, j_far[far][:distant]])
+    positions = graph.values.translation
+    extent = positions.max(axis=0) - positions.min(axis=0)
+    measurements = _random_poses(graph.group, rng, i.size, -extent, extent)
+    pool = np.flatnonzero(loops) if loops.any() else np.arange(graph.num_edges)
+    information = graph.edges.information[rng.choice(pool, size=i.size)]
+    return _with_false_edges(graph, i, j, measurements, information)
+
+
+def _with_false_edges(
+    graph: PoseGraph, i: np.ndarray, j: np.ndarray, measurements: LieGroup, information: np.ndarray
+) -> tuple[PoseGraph, np.ndarray]:
+    """A copy of ``graph`` with edges i → j (node indices) appended, and their mask."""
     corrupted = graph.copy()
     corrupted.add_edges(graph.node_ids[i], graph.node_ids[j], measurements, information)
     false_mask = np.zeros(corrupted.num_edges, dtype=bool)

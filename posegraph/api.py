@@ -18,6 +18,7 @@ def optimize(
     robust: str | RobustSpec | None = None,
     robust_edges: str | np.ndarray = "loops",
     robust_priors: bool = False,
+    calibrate_noise: bool | None = None,
 ) -> Result:
     """Initialise the graph's values by ``init``, minimise its cost, and leave the solution in
     ``graph.values``. A back end that calls again after every keyframe keeps a ``Smoother``,
@@ -34,6 +35,15 @@ def optimize(
     ``RobustSpec``. It covers ``robust_edges`` ("loops", "all", or a boolean mask over the
     between edges or their indices) and, with ``robust_priors``, the priors (GNSS fixes, say;
     ``posegraph.robust.anchoring``). The summary lists the rejected edges and priors
-    (s = rᵀΩr > width²)."""
+    (s = rᵀΩr > width²).
+
+    ``calibrate_noise``: True scales each class's information (odometry, loop closures,
+    priors) by its inliers' χ² per redundant degree of freedom and solves again, until the
+    scales settle (``posegraph.robust.calibration``); None does so in GNC at the default width
+    where GNC kept gross outliers (measurements that fail the χ² test tenfold under the noise
+    the kept residuals show); False never. The graph's information is left
+    scaled, and the summary records the scales (``calibration``) and the noise check (``noise``)."""
     smoother = Smoother(graph)
-    return smoother.optimize(init, options, callback, robust, robust_edges, robust_priors)
+    return smoother.optimize(
+        init, options, callback, robust, robust_edges, robust_priors, calibrate_noise
+    )

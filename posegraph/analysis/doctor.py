@@ -24,7 +24,7 @@ from ..problem.observability import (
     undetermined_direction,
     unmeasured_directions,
 )
-from .noise import NoiseClass, noise_consistency
+from ..robust.noise import NoiseClass, noise_consistency
 
 CONDITION_LIMIT = 1e12
 

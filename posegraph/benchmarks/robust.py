@@ -43,7 +43,7 @@ from ..init.choice import initialize
 from ..io import load_graph
 from ..io.trajectories import Trajectory
 from ..lie import LieGroup
-from ..robust.spec import GNC_QUANTILE, robust_mask
+from ..robust.spec import gnc_quantile, robust_mask
 from ..trajectory.evaluation import evaluate
 from .table import MarkdownTable
 
@@ -71,12 +71,13 @@ def posegraph_gnc(graph: PoseGraph, robust_priors: bool = False) -> Run:
 def gtsam_gnc(graph: PoseGraph, robust_priors: bool = False) -> Run:
     """gtsam's GNC with its TLS loss set up as posegraph's robust mode is: from the odometry
     chain, with the loop closures (and the priors, with ``robust_priors``) under the kernel of
-    the same quantile (``posegraph.validation.gtsam_bridge.gnc_tls``)."""
+    the same quantile (``robust.spec.gnc_quantile``; ``posegraph.validation.gtsam_bridge.gnc_tls``)."""
     from ..validation.gtsam_bridge import gnc_tls
 
     start = initialize(graph, "odometry")
     loops = robust_mask(graph, "loops")
-    return Run(*gnc_tls(graph, start, loops, robust_priors, GNC_QUANTILE))
+    measured = int(loops.sum()) + (len(graph.priors) if robust_priors else 0)
+    return Run(*gnc_tls(graph, start, loops, robust_priors, gnc_quantile(measured)))
 
 
 def ground_truth(name: str) -> PoseGraph | None:

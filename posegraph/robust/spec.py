@@ -15,7 +15,8 @@ GNC = "gnc"
 """Graduated non-convexity with the truncated least-squares kernel ("tls" names it too)."""
 ROBUST_EDGE_CLASSES = ("loops", "all")
 GNC_QUANTILE = 0.999
-"""Default TLS threshold: an inlier's s = rᵀΩr exceeds √χ²_dof(0.999) once in a thousand."""
+"""Default TLS threshold: of all the inliers under the kernel, one's s = rᵀΩr exceeds its width
+once in a thousand graphs (``gnc_quantile``)."""
 KERNEL_QUANTILE = 0.95
 """Default width of the IRLS kernels (Huber, Cauchy, …): √χ²_dof(0.95), Huber's usual choice."""
 
@@ -118,17 +119,25 @@ class Kernel:
         return self.spec.kernel
 
 
+def gnc_quantile(count: int) -> float:
+    """The quantile of each of ``count`` measurements' width under GNC, such that one of them
+    exceeds its width with probability 1 − ``GNC_QUANTILE`` (Bonferroni): 0.999 for one,
+    1 − 10⁻⁶ for a thousand. A per-measurement 0.999 would reject true loops in every graph of
+    a few thousand, and with them pull the map away from the outlier-free optimum."""
+    return 1.0 - (1.0 - GNC_QUANTILE) / max(count, 1)
+
+
 def resolve(spec: RobustSpec, graph: PoseGraph) -> Kernel:
     """The kernel of ``spec`` for ``graph``. Without a width, each measurement's is √χ²_k(q) for
     the k directions its information weighs (its rank: 3 for an SE3 position-only fix, not 6),
-    as gtsam's GNC sets one threshold per factor dimension; q is ``GNC_QUANTILE`` or
-    ``KERNEL_QUANTILE``."""
+    as gtsam's GNC sets one threshold per factor dimension; q is ``gnc_quantile`` of the
+    measurements under the kernel, or ``KERNEL_QUANTILE``."""
     measured = spec.measured(graph)
     name = spec.kernel
     if spec.width is not None:
         widths = np.full(len(measured), spec.width)
         return Kernel(spec, measured, widths, f"{name}:{spec.width:.6g}")
-    quantile = GNC_QUANTILE if spec.gnc else KERNEL_QUANTILE
+    quantile = gnc_quantile(int(measured.sum())) if spec.gnc else KERNEL_QUANTILE
     information = graph.edges.information
     if len(measured) > graph.num_edges:  # the priors, as edges
         information = np.concatenate([information, graph.priors.information])

@@ -12,10 +12,20 @@ import numpy as np
 from ..graph import PoseGraph, measurement_mask
 from ..init.choice import choose, initialize
 from ..problem.linear import NormalEquations
+from ..robust.calibration import calibrate, kernel_classes
 from ..robust.kernels import Robustifier
 from ..robust.run import cost, robust_solve, with_robust_record
 from ..robust.spec import Kernel, RobustSpec, resolve
-from ..solvers import STOPPED, TIME_LIMIT, Callback, Result, SolverOptions, solve
+from ..solvers import (
+    STOPPED,
+    TIME_LIMIT,
+    Callback,
+    IterationRecord,
+    Result,
+    SolverOptions,
+    Summary,
+    solve,
+)
 from . import warm_start
 from .solution import GncProblem, Solution
 
@@ -72,9 +82,12 @@ class Smoother:
         robust: str | RobustSpec | None = None,
         robust_edges: str | np.ndarray = "loops",
         robust_priors: bool = False,
+        calibrate_noise: bool | None = False,
     ) -> Result:
         """Initialise the graph's values by ``init``, minimise its cost, and leave the solution
-        in the graph's values; ``posegraph.optimize`` documents the arguments.
+        in the graph's values; ``posegraph.optimize`` documents the arguments. A back end's
+        calls do not check the noise unless asked (``calibrate_noise`` None or True): the check
+        costs about a solve.
 
         "auto" on a smoother that solved before warm-starts (``warm_start``): the solved nodes
         keep their values, nodes added since are composed and refined alone; in least squares
@@ -94,7 +107,8 @@ class Smoother:
         input_error = cost(self.graph, kernel) if self.graph.initialized.all() else None
         start = self._start(init, kernel, options)
         initialization_time = time.perf_counter() - began
-        result, edge_weights, prior_weights = self._solve(start, kernel, options, callback)
+        solved = self._solve(start, kernel, options, callback)
+        result, *weights = self._calibrate(solved, kernel, options, callback, calibrate_noise)
         summary = dataclasses.replace(
             result.summary,
             initialization=start.init,
@@ -111,15 +125,9 @@ class Smoother:
         )
         graph = self.graph
         graph.set_values(result.values, check=False)
+        gnc = GncProblem(kernel.spec, kernel.measured) if final else None
         self.solution = Solution(
-            graph.edges,
-            graph.priors,
-            edge_weights,
-            prior_weights,
-            graph.fixed.copy(),
-            result.values,
-            summary,
-            GncProblem(kernel.spec, kernel.measured) if final else None,
+            graph.edges, graph.priors, *weights, graph.fixed.copy(), result.values, summary, gnc
         )
         return result
 
@@ -186,6 +194,53 @@ class Smoother:
             graph, kernel, options, callback, self._solve_warm, start.standing, start.decisions
         )
         return outcome.result, outcome.edge_weights, outcome.prior_weights
+
+    def _calibrate(
+        self,
+        solved: tuple[Result, np.ndarray, np.ndarray],
+        kernel: Kernel | None,
+        options: SolverOptions,
+        callback: Callback | None,
+        calibrate_noise: bool | None,
+    ) -> tuple[Result, np.ndarray, np.ndarray]:
+        """``calibrate_noise`` (``calibration.calibrate``) after the first solve, where asked or,
+        with None, in GNC at the default width; the summary records the noise check and the
+        calibration. A GNC solve after a scaling starts from the decisions before it."""
+        automatic = calibrate_noise is None
+        if automatic:
+            calibrate_noise = kernel is not None and kernel.spec.gnc and kernel.spec.width is None
+        stopped = solved[0].summary.termination in (STOPPED, TIME_LIMIT)
+        if not calibrate_noise or stopped or options.max_iterations == 0:
+            return solved
+        solves = [solved]
+
+        def again() -> Result:
+            decisions = None
+            if kernel is not None and kernel.spec.gnc:
+                decisions = np.concatenate(solves[-1][1:])[: len(kernel.measured)] > 0
+            start = _Start("calibration", decisions=decisions)
+            solves.append(self._solve(start, kernel, options, callback))
+            return solves[-1][0]
+
+        began = time.perf_counter()
+        covered = () if kernel is None else kernel_classes(self.graph, kernel.measured)
+        result, calibration, noise = calibrate(
+            self.graph, solved[0], again, automatic, kernel is not None, covered
+        )
+        summaries = [s[0].summary for s in solves]
+        phases = {
+            name: sum(summary.phase_times.get(name, 0.0) for summary in summaries)
+            for name in summaries[0].phase_times
+        }
+        checking = time.perf_counter() - began - sum(s.total_time for s in summaries[1:])
+        summary = dataclasses.replace(
+            result.summary,
+            iterations=_in_turn(summaries),
+            phase_times={**phases, "noise check": checking},
+            noise=[c.as_dict() for c in noise],
+            calibration=None if calibration is None else calibration.as_dict(),
+        )
+        return dataclasses.replace(result, summary=summary), *solves[-1][1:]
 
     def _solve_warm(
         self,
@@ -310,3 +365,17 @@ class Smoother:
             own(edges, len(solution.edges)),
             own(priors, len(solution.priors)),
         )
+
+
+def _in_turn(summaries: list[Summary]) -> list[IterationRecord]:
+    """The iterations of solves made one after another, numbered and timed from the first."""
+    records, offset = [], 0.0
+    for summary in summaries:
+        for record in summary.iterations:
+            records.append(
+                dataclasses.replace(
+                    record, iteration=len(records) + 1, elapsed=record.elapsed + offset
+                )
+            )
+        offset += summary.total_time
+    return records

@@ -66,6 +66,14 @@ class Summary:
     """How many between edges the robust kernel covered (the ``robust_edges`` class)."""
     priors_under_kernel: int = 0
     """How many priors it covered (all with ``robust_priors``, else none)."""
+    noise: list[dict] = dataclasses.field(default_factory=list)
+    """Noise consistency per class of the measurements kept, at the solution
+    (``posegraph.robust.noise.NoiseClass.as_dict``), where it was checked: by a robust run
+    with the default width, by ``calibrate_noise``, or by the command line."""
+    calibration: dict | None = None
+    """The factor each class's information was multiplied by, whether the run chose to, and
+    the solves that took (``posegraph.robust.calibration.Calibration.as_dict``); None where
+    the information was left as given."""
 
     @property
     def initial_chi2(self) -> float:
@@ -103,6 +111,8 @@ class Summary:
             "rejected_priors": list(self.rejected_priors),
             "edges_under_kernel": self.edges_under_kernel,
             "priors_under_kernel": self.priors_under_kernel,
+            "noise": list(self.noise),
+            "calibration": self.calibration,
             "history": [dataclasses.asdict(r) for r in self.iterations],
         }
 

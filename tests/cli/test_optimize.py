@@ -412,3 +412,26 @@ def test_drop_rejected_writes_the_inliers(tmp_path):
     ]:
         refused = run("optimize", path, "--drop-rejected", *extra, check_exit=2)
         assert f"posegraph: error: {message}" in refused.stderr
+
+
+def test_calibrate_noise_reports_the_scales_and_writes_the_scaled_information(tmp_path):
+    """A graph whose information states 100× its noise: the report names the overstatement,
+    --calibrate-noise scales it back, says so in text and JSON, and -o holds it scaled."""
+    from posegraph_datasets.generators import manhattan_world
+
+    graph, _ = manhattan_world(300, seed=4)
+    path, out = tmp_path / "scaled.g2o", tmp_path / "out.g2o"
+    write_graph(graph.weighted(np.full(graph.num_edges, 1e-2)), path)
+    text = run("optimize", path).stdout
+    assert re.search(r"noise +χ² per redundant dof odometry 0\.0\d", text)
+    assert "overstates their noise about" in text and "--calibrate-noise" in text
+    summary = run_json("optimize", path, "--calibrate-noise", "-o", out)["summary"]
+    calibration = summary["calibration"]
+    assert calibration["automatic"] is False and calibration["solves"] >= 1
+    assert all(60 < scale < 140 for scale in calibration["scales"].values())
+    assert all(abs(c["chi2_per_dof"] - 1) < 0.3 for c in summary["noise"])
+    written = read_graph(str(out)).graph
+    factor = written.edges.information[0, 0, 0] / (1e-2 * graph.edges.information[0, 0, 0])
+    assert factor == pytest.approx(calibration["scales"]["odometry"], rel=1e-6)
+    text = run("optimize", path, "--calibrate-noise").stdout
+    assert re.search(r"calibrated +information odometry ×\d+", text)

@@ -81,3 +81,27 @@ def test_resimulate_draws_each_edge_with_its_full_information():
     np.testing.assert_allclose(np.cov(whitened.T), np.eye(3), atol=2 * tolerance)
     again = resimulate(graph, truth, seed=5).edges.measurements.translation
     np.testing.assert_array_equal(again, simulated.edges.measurements.translation)
+
+
+def test_false_loops_anywhere_join_near_and_distant_nodes_with_the_files_loop_information():
+    from posegraph_datasets.outliers import NEARBY, add_false_loops_anywhere
+
+    from posegraph.graph import odometry_mask
+
+    graph, _ = manhattan_world(400, seed=5)
+    loops = ~odometry_mask(graph)
+    corrupted, false = add_false_loops_anywhere(graph, 0.3, seed=1)
+    assert false.sum() == round(0.3 / 0.7 * loops.sum())
+    assert np.array_equal(corrupted.edges.information[~false], graph.edges.information)
+    gaps = np.abs(corrupted.edges.i[false] - corrupted.edges.j[false])
+    nearby = (gaps >= 2) & (gaps <= NEARBY)
+    assert gaps.min() >= 2 and abs(nearby.mean() - 0.5) < 0.05
+    loop_information = {m.tobytes() for m in graph.edges.information[loops]}
+    assert all(m.tobytes() in loop_information for m in corrupted.edges.information[false])
+    positions = graph.values.translation
+    extent = positions.max(axis=0) - positions.min(axis=0)
+    translations = corrupted.edges.measurements[false].translation
+    assert (np.abs(translations) <= extent).all()
+    assert (
+        np.abs(translations).max(axis=0) > 0.8 * extent
+    ).all()  # the whole extent, not odometry's

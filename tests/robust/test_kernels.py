@@ -23,7 +23,7 @@ from posegraph.problem.factors import (
 )
 from posegraph.robust.anchoring import priors_as_edges
 from posegraph.robust.kernels import KERNELS, RobustKernel, default_width, tls_gnc_weights
-from posegraph.robust.spec import KERNEL_QUANTILE, robust_mask
+from posegraph.robust.spec import KERNEL_QUANTILE, gnc_quantile, robust_mask
 from tests.robust.helpers import gnss_with_a_bad_fix
 
 from ..conftest import (
@@ -35,7 +35,8 @@ def _robust_cost(graph, values, kernel, loops, robust_priors):
     """½ Σ ρ(s) over the loops (and the priors, with ``robust_priors``), ½ Σ s over the rest;
     ρ(s) = min(s, c²) for "gnc", else the kernel's."""
     if kernel == "gnc":
-        width_sq = default_width(graph.group.dof, 0.999) ** 2
+        measured = int(loops.sum()) + (len(graph.priors) if robust_priors else 0)
+        width_sq = default_width(graph.group.dof, gnc_quantile(measured)) ** 2
         rho = lambda s: np.minimum(s, width_sq)  # noqa: E731
     else:
         rho = RobustKernel(kernel, default_width(graph.group.dof, KERNEL_QUANTILE)).cost

@@ -12,10 +12,10 @@ from posegraph_datasets.outliers import add_false_loops
 
 import posegraph
 from posegraph.benchmarks.incremental import arrivals, run, stream
-from posegraph.graph import PoseGraph
+from posegraph.graph import PoseGraph, odometry_mask
 from posegraph.io import read_graph, write_graph
 from posegraph.lie import SE2
-from posegraph.robust.spec import robust_mask
+from posegraph.robust.spec import gnc_quantile, robust_mask
 from posegraph.smoother import COMPOSED
 from posegraph.solvers import STOPPED
 from tests.smoother.helpers import drive_on, searched_from_decisions
@@ -344,7 +344,8 @@ def test_without_rejected_keeps_what_a_robust_solve_kept():
         least_squares.summary.initial_error, rel=1e-9
     )
     np.testing.assert_allclose(inliers.positions(), corrupted.positions(), atol=1e-6)
-    width_squared = chi2_distribution.ppf(0.999, 3)
+    under_kernel = (~odometry_mask(corrupted)).sum() + len(corrupted.priors)
+    width_squared = chi2_distribution.ppf(gnc_quantile(int(under_kernel)), 3)
     rejected = false_loops.sum() + false_fixes.sum()
     assert robust.summary.final_error == pytest.approx(
         least_squares.summary.final_error + 0.5 * width_squared * rejected, rel=1e-9

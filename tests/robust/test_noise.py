@@ -8,8 +8,8 @@ from posegraph_datasets.generators import manhattan_world
 from posegraph_datasets.outliers import add_false_loops
 
 import posegraph
-from posegraph.analysis.noise import noise_consistency
 from posegraph.graph import EdgeSet
+from posegraph.robust.noise import noise_consistency
 
 
 @pytest.fixture(scope="module")
@@ -42,7 +42,7 @@ def test_scaled_information_is_named_with_its_factor(simulated):
         what, suggestion = noise_class.finding()
         assert f"the information of the {noise_class.kind} overstates their noise about" in what
         assert 9e3 < 1 / noise_class.chi2_per_dof < 1.1e4
-        assert "--robust gnc:WIDTH" in suggestion
+        assert "--calibrate-noise" in suggestion
 
 
 def test_noise_free_measurements_are_not_a_finding(simulated):

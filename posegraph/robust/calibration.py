@@ -1,0 +1,263 @@
+"""Noise calibration: one precision scale per class of measurement (odometry, loop closures,
+priors), estimated from its inliers' deleted residuals at a least-squares solution and applied
+to the class's information, iterated with the solve (variance component estimation: Förstner
+1979, "Ein Verfahren zur Schätzung von Varianz- und Kovarianzkomponenten"; Koch 1999,
+"Parameter Estimation and Hypothesis Testing in Linear Models", §3.6, made robust).
+
+Two scales per class, from the tests d² (χ²_rank when the information states the noise): the
+deleted residuals of the inliers, and the innovations of what a robust solve left out:
+- the median scale, median(χ²_rank median / d²) over the inliers: robust to the outliers among
+  them, but on real data, whose residuals have heavier tails than a Gaussian's, it fails
+  Baarda's test on several per cent of the true measurements;
+- the tail scale, the largest at which no more of all the measurements fail the test than it
+  lets through, leaving out the gross outliers: those that fail it by more than ``OFF_BY``
+  times its limit under the median scale.
+A class gets the smaller; in a robust solve that kept gross outliers, the median scale, so that
+the next solve rejects them (and the tail scale then re-admits the true measurements of the
+heavy tail that it rejected too). In least squares the inliers are the measurements that pass
+the test.
+
+A robust run at the default width calibrates on its own where it kept gross outliers: false
+loops that an information overstating the noise let the kernel keep (parking-garage's states
+20,000× its noise). It scales every class alike, by the smallest scale of the classes under the
+kernel (the loop closures, by default; odometry that false loops bent says little): what it
+corrects is the kernel's width relative to the noise, and the classes' relative weights, and
+with them the least-squares solution over a set of inliers, stay the file's."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+
+import numpy as np
+
+from ..graph import PoseGraph
+from ..graph.checks import information_ranks
+from ..lie import LieGroup
+from ..problem.cholesky import NotPositiveDefinite
+from ..problem.factors import between_squares, prior_squares
+from ..solvers import Result
+from .kernels import default_width
+from .leverage import Leverage
+from .noise import (
+    KINDS,
+    OFF_BY,
+    QUANTILE,
+    MeasurementTests,
+    NoiseClass,
+    limits,
+    measurement_kinds,
+    measurement_tests,
+)
+
+INLIER_PASSES = 5
+"""Passes of the least-squares inlier test (each with the scale of the last) at one solution."""
+SETTLED = 1.5
+"""Calibration stops once every class's new scale is within this factor of 1."""
+ROUNDS = 4
+"""Solves after the first, at most."""
+FEWEST = 10
+"""A class with fewer inliers keeps its information."""
+REDUNDANT = 0.05
+"""Measurements whose redundancy per degree of freedom is below this (that little else
+measures) say nothing of the noise: their deleted residual is r̃ᵀ(I − M)⁻¹r̃ with I − M ≈ 0."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Calibration:
+    """What calibration did: the factor each class's information was multiplied by, whether it
+    ran on its own (``automatic``), and the solves it took after the first."""
+
+    scales: dict[str, float]
+    automatic: bool
+    solves: int
+
+    def as_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+@dataclasses.dataclass(frozen=True)
+class Estimate:
+    """Calibration's estimate at one solution: each class's median and tail scales (classes
+    without ``FEWEST`` telling inliers left out), the inliers' noise consistency, and how many
+    of them are gross outliers."""
+
+    median: dict[str, float]
+    tail: dict[str, float]
+    classes: list[NoiseClass]
+    gross: int
+
+    def scales(self) -> dict[str, float]:
+        """The smaller of the two scales of each class."""
+        return {kind: min(scale, self.tail[kind]) for kind, scale in self.median.items()}
+
+
+def estimate(
+    graph: PoseGraph,
+    values: LieGroup,
+    edge_inliers: np.ndarray | None = None,
+    prior_inliers: np.ndarray | None = None,
+) -> Estimate:
+    """The estimate at ``values``, a least-squares solution over the given inliers (by default
+    every measurement, of which those that pass Baarda's test under their class's scale are
+    the inliers). The measurements left out are tested by their innovation against the
+    solution (a prior's by its s) and count in the tail scales, so that true ones of a heavy
+    tail, rejected under a scale that was too large, pull it back."""
+    if edge_inliers is None:
+        tests = measurement_tests(graph, values)
+        inliers = np.ones(tests.kinds.size, dtype=bool)
+        found = _estimate(tests, inliers)
+        for _ in range(INLIER_PASSES):
+            passing = tests.tested * _by_measurement(tests, found.scales()) <= tests.limits
+            if np.array_equal(passing, inliers):
+                break
+            inliers = passing
+            found = _estimate(tests, inliers)
+        return found
+    work = graph.with_edges(edge_inliers)
+    work.priors = graph.priors.subset(prior_inliers)
+    tests = _with_left_out(graph, work, values, edge_inliers, prior_inliers)
+    inliers = np.arange(tests.kinds.size) < work.num_edges + len(work.priors)
+    return _estimate(tests, inliers)
+
+
+def _with_left_out(graph, work, values, edge_inliers, prior_inliers) -> MeasurementTests:
+    """The tests of ``work`` (the inliers), then those of the edges and priors left out."""
+    tests = measurement_tests(work, values)
+    out_edges = graph.edges.subset(~edge_inliers)
+    out_priors = graph.priors.subset(~prior_inliers)
+    if not len(out_edges) and not len(out_priors):
+        return tests
+    innovation = np.zeros(0)
+    if len(out_edges):
+        innovation = Leverage(work, values).innovations(out_edges)
+    prior_s = prior_squares(values, out_priors)
+    ranks = np.concatenate(
+        [information_ranks(out_edges.information), information_ranks(out_priors.information)]
+    )
+    kinds = measurement_kinds(graph)
+    left_out = np.concatenate([~edge_inliers, ~prior_inliers])
+    parts = (
+        kinds[left_out],
+        np.concatenate([between_squares(values, out_edges), prior_s]),
+        ranks.astype(float),
+        np.concatenate([innovation, prior_s]),
+        ranks,
+        limits(ranks),
+    )
+    joined = [
+        np.concatenate([mine, theirs])
+        for mine, theirs in zip(dataclasses.astuple(tests), parts, strict=True)
+    ]
+    return MeasurementTests(*joined)
+
+
+def _estimate(tests: MeasurementTests, inliers: np.ndarray) -> Estimate:
+    """The estimate from ``tests``: median scales over the ``inliers``, gross outliers among
+    all, tail scales over all but the gross ones, and the inliers' noise consistency."""
+    telling = (tests.redundancy >= REDUNDANT * tests.rank) & (tests.tested > 0)
+    telling &= np.isfinite(tests.tested)
+    median, tail = {}, {}
+    for index, kind in enumerate(KINDS):
+        members = inliers & telling & (tests.kinds == index)
+        if np.count_nonzero(members) >= FEWEST:
+            expected = _CHI2_MEDIAN[tests.rank[members]]
+            median[kind] = float(np.median(expected / tests.tested[members]))
+    gross = tests.tested * _by_measurement(tests, median) > OFF_BY * tests.limits
+    for index, kind in enumerate(KINDS):
+        members = telling & ~gross & (tests.kinds == index)
+        if kind in median:
+            bounds = np.sort(tests.limits[members] / tests.tested[members])
+            allowed = max(1, int((1.0 - QUANTILE) * bounds.size))
+            tail[kind] = float(bounds[allowed]) if bounds.size > allowed else np.inf
+    return Estimate(median, tail, tests.classes(inliers), int(np.count_nonzero(gross & inliers)))
+
+
+_CHI2_MEDIAN = np.array([0.0] + [default_width(k, 0.5) ** 2 for k in range(1, 8)])
+"""The median of χ²_k by k, to the largest tangent (Sim3's 7)."""
+
+
+def _by_measurement(tests: MeasurementTests, scales: dict[str, float]) -> np.ndarray:
+    return np.array([scales.get(kind, 1.0) for kind in KINDS])[tests.kinds]
+
+
+def kernel_classes(graph: PoseGraph, measured: np.ndarray) -> tuple[str, ...]:
+    """The classes of the measurements under a robust kernel, from its ``measured`` mask over
+    the between edges, then the priors where it covers them."""
+    under = np.zeros(graph.num_edges + len(graph.priors), dtype=bool)
+    under[: len(measured)] = measured
+    return tuple(KINDS[kind] for kind in np.unique(measurement_kinds(graph)[under]))
+
+
+def scale_information(graph: PoseGraph, scales: dict[str, float]) -> None:
+    """Multiplies each class's information in ``graph`` by its scale (1 where absent)."""
+    factors = np.array([scales.get(kind, 1.0) for kind in KINDS])
+    weights = factors[measurement_kinds(graph)]
+    graph.edges = graph.edges.weighted(weights[: graph.num_edges])
+    graph.priors = graph.priors.weighted(weights[graph.num_edges :])
+
+
+def calibrate(
+    graph: PoseGraph,
+    first: Result,
+    solve: Callable[[], Result],
+    automatic: bool,
+    robust: bool,
+    covered: tuple[str, ...] = (),
+) -> tuple[Result, Calibration | None, list[NoiseClass]]:
+    """Calibrates ``graph``'s information from a solve's ``first`` result, re-solving with
+    ``solve`` (from the graph's values, which it sets to the last solution) after each
+    scaling (module docstring). ``robust``: the inliers are what each solve did not reject
+    (its summary's ``rejected_edges`` and ``rejected_priors``), and where some are gross
+    outliers, the median scales apply to reveal them (the next solve rejects them), the tail
+    scales after. ``automatic``: only where the first solve kept gross outliers (else the graph
+    is untouched and the calibration None), every class then scaled alike, by the smallest
+    scale of the classes under the kernel (``covered``).
+    Returns the last result, the calibration, and the noise consistency of the measurements it
+    kept."""
+    result, total, solves, classes = first, dict.fromkeys(KINDS, 1.0), 0, []
+    stalled = False  # the last scaling changed no decision: further ones would not either
+    while True:
+        try:
+            found = estimate(
+                graph, result.values, *(kept(graph, result) if robust else (None, None))
+            )
+        except (NotPositiveDefinite, np.linalg.LinAlgError):  # no covariance: nothing to test
+            break
+        classes = found.classes
+        if automatic and solves == 0 and not found.gross:
+            return result, None, classes
+        scales = found.median if robust and found.gross else found.scales()
+        under_kernel = [scales[kind] for kind in covered if kind in scales]
+        if automatic and under_kernel:  # the kernel's width, not the classes' relative weights
+            scales = dict.fromkeys(scales, min(under_kernel))
+        settled = all(1 / SETTLED <= s <= SETTLED for s in scales.values())
+        if solves == ROUNDS or settled or stalled:
+            break
+        scale_information(graph, scales)
+        for kind, scale in scales.items():
+            total[kind] *= scale
+        graph.set_values(result.values, check=False)
+        before = kept(graph, result)
+        result, solves = solve(), solves + 1
+        stalled = robust and all(map(np.array_equal, before, kept(graph, result)))
+    if automatic and solves == 0:
+        return result, None, classes
+    present = {c.kind for c in classes}
+    scales = {k: v for k, v in total.items() if k in present or v != 1.0}
+    calibration = Calibration(scales, automatic, solves)
+    return result, calibration, classes
+
+
+def kept(graph: PoseGraph, result: Result) -> tuple[np.ndarray, np.ndarray]:
+    """The edges and priors that a solve did not reject (all, in least squares)."""
+    edges = np.ones(graph.num_edges, dtype=bool)
+    edges[result.summary.rejected_edges] = False
+    priors = np.ones(len(graph.priors), dtype=bool)
+    priors[result.summary.rejected_priors] = False
+    return edges, priors
+
+
+def kept_noise(graph: PoseGraph, result: Result) -> list[NoiseClass]:
+    """The noise consistency of the measurements that a solve kept, at its solution."""
+    return estimate(graph, result.values, *kept(graph, result)).classes

@@ -1,0 +1,80 @@
+"""Noise calibration: it restores information scaled away from the simulated noise, and robust
+mode calibrates where that scaling hid false loops, and only there."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from posegraph_datasets.generators import manhattan_world
+from posegraph_datasets.outliers import add_false_loops, rejection_rates
+
+import posegraph
+from posegraph.graph import odometry_mask
+
+
+@pytest.fixture(scope="module")
+def simulated():
+    """A manhattan world whose measurements' noise is what their information states, and its
+    least-squares solution."""
+    graph, _ = manhattan_world(1000, seed=3)
+    return graph, posegraph.optimize(graph.copy()).values
+
+
+def _scaled(graph: posegraph.PoseGraph, odometry: float, loops: float) -> posegraph.PoseGraph:
+    weights = np.where(odometry_mask(graph), odometry, loops)
+    return graph.weighted(weights)
+
+
+def _distance(a, b) -> float:
+    return float(np.abs(a.translation - b.translation).max())
+
+
+def test_calibration_restores_each_class_s_information(simulated):
+    """Odometry stated 100× too noisy and loops 100× too precise: the scales undo both, and
+    the solution is the one of the true information, where least squares on the scaled
+    information is not."""
+    graph, solution = simulated
+    scaled = _scaled(graph, 1e-2, 1e2)
+    uncalibrated = posegraph.optimize(scaled.copy()).values
+    work = scaled.copy()
+    result = posegraph.optimize(work, calibrate_noise=True)
+    scales = result.summary.calibration["scales"]
+    assert result.summary.calibration["automatic"] is False
+    assert 70 < scales["odometry"] < 130
+    assert 0.007 < scales["loop closures"] < 0.013
+    assert _distance(result.values, solution) < 0.1 * _distance(uncalibrated, solution)
+    # The graph holds the scaled information, and the noise check is 1 per degree of freedom.
+    factor = work.edges.information[0, 0, 0] / scaled.edges.information[0, 0, 0]
+    assert factor == pytest.approx(scales["odometry"], rel=1e-9)
+    for noise_class in result.summary.noise:
+        assert noise_class["chi2_per_dof"] == pytest.approx(1.0, abs=0.3)
+
+
+def test_robust_mode_calibrates_where_the_information_hides_false_loops(simulated):
+    """With the information stating 100× the noise, GNC's default width keeps false loops;
+    robust mode finds that, scales the information, and rejects them."""
+    graph, _ = simulated
+    corrupted, false = add_false_loops(_scaled(graph, 1e-2, 1e-2), 0.3, seed=0)
+    left = posegraph.optimize(corrupted.copy(), robust="gnc", calibrate_noise=False)
+    rejected_false, _ = rejection_rates(corrupted, false, np.array(left.summary.rejected_edges))
+    assert rejected_false < 0.99  # what calibration is for
+    result = posegraph.optimize(corrupted.copy(), robust="gnc")
+    rejected_false, rejected_true = rejection_rates(
+        corrupted, false, np.array(result.summary.rejected_edges)
+    )
+    assert rejected_false == 1.0 and rejected_true <= 0.001
+    calibration = result.summary.calibration
+    assert calibration["automatic"] is True
+    assert all(50 < scale < 200 for scale in calibration["scales"].values())
+
+
+def test_robust_mode_leaves_information_that_hides_nothing(simulated):
+    graph, _ = simulated
+    corrupted, false = add_false_loops(graph, 0.1, seed=1)
+    work = corrupted.copy()
+    result = posegraph.optimize(work, robust="gnc")
+    assert result.summary.calibration is None
+    assert np.array_equal(work.edges.information, corrupted.edges.information)
+    assert [c["kind"] for c in result.summary.noise] == ["odometry", "loop closures"]
+    for noise_class in result.summary.noise:
+        assert noise_class["chi2_per_dof"] == pytest.approx(1.0, abs=0.15)
