@@ -48,6 +48,7 @@ from .noise import (
     limits,
     measurement_kinds,
     measurement_tests,
+    noise_consistency,
 )
 
 INLIER_PASSES = 5
@@ -114,8 +115,7 @@ def estimate(
             inliers = passing
             found = _estimate(tests, inliers)
         return found
-    work = graph.with_edges(edge_inliers)
-    work.priors = graph.priors.subset(prior_inliers)
+    work = _inliers(graph, edge_inliers, prior_inliers)
     tests = _with_left_out(graph, work, values, edge_inliers, prior_inliers)
     inliers = np.arange(tests.kinds.size) < work.num_edges + len(work.priors)
     return _estimate(tests, inliers)
@@ -145,10 +145,8 @@ def _with_left_out(graph, work, values, edge_inliers, prior_inliers) -> Measurem
         ranks,
         limits(ranks),
     )
-    joined = [
-        np.concatenate([mine, theirs])
-        for mine, theirs in zip(dataclasses.astuple(tests), parts, strict=True)
-    ]
+    mine = (getattr(tests, field.name) for field in dataclasses.fields(tests))
+    joined = [np.concatenate(pair) for pair in zip(mine, parts, strict=True)]
     return MeasurementTests(*joined)
 
 
@@ -260,4 +258,11 @@ def kept(graph: PoseGraph, result: Result) -> tuple[np.ndarray, np.ndarray]:
 
 def kept_noise(graph: PoseGraph, result: Result) -> list[NoiseClass]:
     """The noise consistency of the measurements that a solve kept, at its solution."""
-    return estimate(graph, result.values, *kept(graph, result)).classes
+    return noise_consistency(_inliers(graph, *kept(graph, result)), result.values)
+
+
+def _inliers(graph: PoseGraph, edges: np.ndarray, priors: np.ndarray) -> PoseGraph:
+    """The graph of the edges and priors where the masks hold."""
+    work = graph.with_edges(edges)
+    work.priors = graph.priors.subset(priors)
+    return work
