@@ -98,12 +98,13 @@ def estimate(
     values: LieGroup,
     edge_inliers: np.ndarray | None = None,
     prior_inliers: np.ndarray | None = None,
+    left_out: bool = True,
 ) -> Estimate:
     """The estimate at ``values``, a least-squares solution over the given inliers (by default
     every measurement, of which those that pass Baarda's test under their class's scale are
-    the inliers). The measurements left out are tested by their innovation against the
-    solution (a prior's by its s) and count in the tail scales, so that true ones of a heavy
-    tail, rejected under a scale that was too large, pull it back."""
+    the inliers). With ``left_out``, the measurements left out are tested by their innovation
+    against the solution (a prior's by its s) and count in the tail scales, so that true ones
+    of a heavy tail, rejected under a scale that was too large, pull it back."""
     if edge_inliers is None:
         tests = measurement_tests(graph, values)
         inliers = np.ones(tests.kinds.size, dtype=bool)
@@ -116,6 +117,9 @@ def estimate(
             found = _estimate(tests, inliers)
         return found
     work = _inliers(graph, edge_inliers, prior_inliers)
+    if not left_out:
+        tests = measurement_tests(work, values)
+        return _estimate(tests, np.ones(tests.kinds.size, dtype=bool))
     tests = _with_left_out(graph, work, values, edge_inliers, prior_inliers)
     inliers = np.arange(tests.kinds.size) < work.num_edges + len(work.priors)
     return _estimate(tests, inliers)
@@ -216,14 +220,16 @@ def calibrate(
     result, total, solves, classes = first, dict.fromkeys(KINDS, 1.0), 0, []
     stalled = False  # the last scaling changed no decision: further ones would not either
     while True:
+        inliers = kept(graph, result) if robust else (None, None)
+        checking = automatic and solves == 0  # the gross outliers first; the tail if any
         try:
-            found = estimate(
-                graph, result.values, *(kept(graph, result) if robust else (None, None))
-            )
+            found = estimate(graph, result.values, *inliers, left_out=not checking)
+            if checking and found.gross:
+                found = estimate(graph, result.values, *inliers)
         except (NotPositiveDefinite, np.linalg.LinAlgError):  # no covariance: nothing to test
             break
         classes = found.classes
-        if automatic and solves == 0 and not found.gross:
+        if checking and not found.gross:
             return result, None, classes
         scales = found.median if robust and found.gross else found.scales()
         under_kernel = [scales[kind] for kind in covered if kind in scales]
