@@ -83,8 +83,7 @@ def _noise_lines(summary: Summary) -> list[str]:
             else "--calibrate-noise"
         )
         lines.append(
-            f"  calibrated      information {scales} ({why}; {_solves(calibration['solves'])}"
-            "); the output holds it so"
+            f"  calibrated      information {scales} ({why}; {_solves(calibration['solves'])})"
         )
     return lines
 
