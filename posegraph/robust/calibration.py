@@ -179,8 +179,13 @@ _CHI2_MEDIAN = np.array([0.0] + [default_width(k, 0.5) ** 2 for k in range(1, 8)
 """The median of χ²_k by k, to the largest tangent (Sim3's 7)."""
 
 
+def _factors(scales: dict[str, float]) -> np.ndarray:
+    """The scale of each class by its index in ``KINDS`` (1 where absent)."""
+    return np.array([scales.get(kind, 1.0) for kind in KINDS])
+
+
 def _by_measurement(tests: MeasurementTests, scales: dict[str, float]) -> np.ndarray:
-    return np.array([scales.get(kind, 1.0) for kind in KINDS])[tests.kinds]
+    return _factors(scales)[tests.kinds]
 
 
 def kernel_classes(graph: PoseGraph, measured: np.ndarray) -> tuple[str, ...]:
@@ -193,8 +198,7 @@ def kernel_classes(graph: PoseGraph, measured: np.ndarray) -> tuple[str, ...]:
 
 def scale_information(graph: PoseGraph, scales: dict[str, float]) -> None:
     """Multiplies each class's information in ``graph`` by its scale (1 where absent)."""
-    factors = np.array([scales.get(kind, 1.0) for kind in KINDS])
-    weights = factors[measurement_kinds(graph)]
+    weights = _factors(scales)[measurement_kinds(graph)]
     graph.edges = graph.edges.weighted(weights[: graph.num_edges])
     graph.priors = graph.priors.weighted(weights[graph.num_edges :])
 
