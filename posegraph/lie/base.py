@@ -339,6 +339,45 @@ class LieGroup(ABC):
         eye = np.broadcast_to(np.eye(self.dof), value.batch_shape + (self.dof, self.dof))
         return value, -value.inverse().adjoint(), eye
 
+    @classmethod
+    def exp_with_jacobians(cls: type[G], tangent: np.ndarray) -> tuple[G, np.ndarray]:
+        """``(Exp ξ, ∂/∂ξ = jr(ξ))``: Exp(ξ + dξ) ≈ Exp(ξ) · Exp(jr(ξ) dξ)."""
+        return cls.exp(tangent), cls.jr(tangent)
+
+    def retract_with_jacobians(self: G, delta: np.ndarray) -> tuple[G, np.ndarray, np.ndarray]:
+        """``(X · Exp(δ), ∂/∂δ_X = Ad(Exp(δ)⁻¹), ∂/∂δ = jr(δ))``: compose and Exp chained."""
+        step, j_delta = self.exp_with_jacobians(delta)
+        value, j_x, _ = self.compose_with_jacobians(step)
+        return value, j_x, j_delta
+
+    def local_with_jacobians(self: G, other: G) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(ξ = Log(X⁻¹ Y), ∂ξ/∂δ_X = −jr⁻¹(ξ) Ad(Exp(−ξ)), ∂ξ/∂δ_Y = jr⁻¹(ξ))``: between and
+        Log chained; the first equals −jl⁻¹(ξ)."""
+        between, j_x, _ = self.between_with_jacobians(other)
+        tangent, j_log = between.log_with_jacobians()
+        return tangent, j_log @ j_x, j_log
+
+    def interpolate_with_jacobians(self: G, other: G, alpha) -> tuple[G, np.ndarray, np.ndarray]:
+        """``(X · Exp(α Log(X⁻¹ Y)), ∂/∂δ_X, ∂/∂δ_Y)``: ``local`` and ``retract`` chained."""
+        alpha = np.asarray(alpha, float)[..., None, None]
+        tangent, local_x, local_y = self.local_with_jacobians(other)
+        value, j_x, j_step = self.retract_with_jacobians(alpha[..., 0] * tangent)
+        j_step = alpha * j_step
+        return value, j_x + j_step @ local_x, j_step @ local_y
+
+    @classmethod
+    def bch(cls, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """The Baker–Campbell–Hausdorff series to third order: Log(Exp(x) Exp(y)) ≈ x + y +
+        ½[x, y] + (1/12)([x, [x, y]] + [y, [y, x]]), with [a, b] = ad_a b, exact to O(|x|⁴ +
+        |y|⁴) (Dellaert, "Lie groups for beginners", §2.3; Solà et al. 2018, eq. 143)."""
+        x, y = np.asarray(x, float), np.asarray(y, float)
+
+        def bracket(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+            return np.einsum("...ij,...j->...i", cls.ad(a), b)
+
+        xy = bracket(x, y)
+        return x + y + xy / 2 + (bracket(x, xy) - bracket(y, xy)) / 12
+
     def log_with_jacobians(self) -> tuple[np.ndarray, np.ndarray]:
         """``(ξ = Log X, ∂ξ/∂δ = jr⁻¹(ξ))``; the Jacobian is an ordinary (Euclidean) one."""
         tangent = self.log()

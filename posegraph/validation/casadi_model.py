@@ -195,13 +195,43 @@ def has_log(group: type[LieGroup]) -> bool:
     return group not in (Aff2, SL3)
 
 
+INTERPOLATION_WEIGHT = 0.3
+"""The α at which ``jacobian_functions`` differentiates ``interpolate``."""
+
+
+def _chained(group: type[LieGroup], a, b, d, e) -> dict[str, ca.SX]:
+    """``jacobian_functions``' perturbed expressions of Exp, retract, and where the model has
+    a Log, of Log, local and interpolate, at X = Exp(a), Y = Exp(b), δ = d, Exp(δ) ≈ e."""
+    x, y, step = _exp(group, a), _exp(group, b), _exp(group, b)
+    expressions = {
+        "exp": _vee(group, _exp(group, -a) @ _exp(group, a + d)),
+        "retract_a": _vee(group, ca.inv(x @ step) @ x @ e @ step),
+        "retract_b": _vee(group, ca.inv(step) @ _exp(group, b + d)),
+    }
+    if not has_log(group):
+        return expressions
+    expressions["jr_inv"] = _log(group, x @ e)
+    expressions["jl_inv"] = _log(group, e @ x)
+    expressions["log"] = _log(group, x @ e)
+    expressions["local_a"] = _log(group, ca.inv(x @ e) @ y)
+    expressions["local_b"] = _log(group, ca.inv(x) @ y @ e)
+    middle = x @ _exp(group, INTERPOLATION_WEIGHT * _log(group, ca.inv(x) @ y))
+    for name, moved_x, moved_y in (("interpolate_a", x @ e, y), ("interpolate_b", x, y @ e)):
+        weighted = INTERPOLATION_WEIGHT * _log(group, ca.inv(moved_x) @ moved_y)
+        expressions[name] = _vee(group, ca.inv(middle) @ moved_x @ _exp(group, weighted))
+    return expressions
+
+
 def jacobian_functions(group: type[LieGroup]) -> dict[str, Callable[..., np.ndarray]]:
     """Casadi Jacobians of ``group`` at X = Exp(a), Y = Exp(b) and point p.
 
     Each value takes arrays ``a`` (N, dof), ``b`` (N, dof), ``p`` (N, point_dim) and returns
     the (N, rows, cols) Jacobians, with the same meaning as posegraph's:
     ``jr``, ``jl``, ``jr_inv``, ``jl_inv`` (at ξ = a), ``compose_a``, ``compose_b``,
-    ``inverse``, ``between_a``, ``between_b``, ``log``, ``act_element``, ``act_point``.
+    ``inverse``, ``between_a``, ``between_b``, ``log``, ``act_element``, ``act_point``,
+    ``exp`` (at a), ``retract_a``, ``retract_b`` (X.retract(b)), and where the model has a Log,
+    ``local_a``, ``local_b`` (X.local(Y)), ``interpolate_a``, ``interpolate_b`` (at α =
+    ``INTERPOLATION_WEIGHT``).
     """
     n = group.dof
     a, b, d = ca.SX.sym("a", n), ca.SX.sym("b", n), ca.SX.sym("d", n)
@@ -221,10 +251,7 @@ def jacobian_functions(group: type[LieGroup]) -> dict[str, Callable[..., np.ndar
         "between_a": _vee(group, ca.inv(z) @ ca.inv(x @ e) @ y),
         "between_b": _vee(group, ca.inv(z) @ ca.inv(x) @ y @ e),
     }
-    if has_log(group):
-        expressions["jr_inv"] = _log(group, x @ e)
-        expressions["jl_inv"] = _log(group, e @ x)
-        expressions["log"] = _log(group, x @ e)
+    expressions.update(_chained(group, a, b, d, e))
     lifted = p if group.matrix_size == group.point_dim else ca.vertcat(p, 1)
     moved = (x @ e @ lifted)[: group.point_dim]
     jacobians = {name: ca.jacobian(expr, d) for name, expr in expressions.items()}

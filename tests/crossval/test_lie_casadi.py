@@ -30,6 +30,12 @@ def test_jacobians_equal_casadi(group):
     _, ours["between_a"], ours["between_b"] = x.between_with_jacobians(y)
     _, ours["log"] = x.log_with_jacobians()
     _, ours["act_element"], ours["act_point"] = x.act_with_jacobians(p)
+    _, ours["exp"] = group.exp_with_jacobians(a)
+    _, ours["retract_a"], ours["retract_b"] = x.retract_with_jacobians(b)
+    if casadi_model.has_log(group):
+        _, ours["local_a"], ours["local_b"] = x.local_with_jacobians(y)
+        weight = casadi_model.INTERPOLATION_WEIGHT
+        _, ours["interpolate_a"], ours["interpolate_b"] = x.interpolate_with_jacobians(y, weight)
     symbolic = casadi_model.jacobian_functions(group)
     reference = {name: function(a, b, p) for name, function in symbolic.items()}
     if not casadi_model.has_log(group):

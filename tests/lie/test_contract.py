@@ -199,3 +199,57 @@ def test_log_and_act_jacobians(group, batch_shape, rng):
     )
     numeric_p = numerical_jacobian(lambda p: x @ p, points, group.point_dim, False, False)
     np.testing.assert_allclose(j_p, numeric_p, atol=JACOBIAN_ATOL)
+
+
+def test_exp_retract_local_interpolate_jacobians(group, batch_shape, rng):
+    """Each against central differences on the manifold."""
+    n = group.dof
+    x = group.exp(random_tangent(group, rng, batch_shape))
+    y = x.retract(random_tangent(group, rng, batch_shape) * 0.5)
+    tangent = random_tangent(group, rng, batch_shape)
+    _, j_exp = group.exp_with_jacobians(tangent)
+    np.testing.assert_allclose(
+        j_exp, numerical_jacobian(group.exp, tangent, n, False, True), atol=JACOBIAN_ATOL
+    )
+    value, j_x, j_delta = x.retract_with_jacobians(tangent)
+    assert_same_element(value, x.retract(tangent))
+    np.testing.assert_allclose(
+        j_x, numerical_jacobian(lambda a: a.retract(tangent), x, n, True, True), atol=JACOBIAN_ATOL
+    )
+    np.testing.assert_allclose(
+        j_delta, numerical_jacobian(x.retract, tangent, n, False, True), atol=JACOBIAN_ATOL
+    )
+    local, j_x, j_y = x.local_with_jacobians(y)
+    np.testing.assert_allclose(local, x.local(y), atol=1e-12)
+    np.testing.assert_allclose(
+        j_x, numerical_jacobian(lambda a: a.local(y), x, n, True, False), atol=JACOBIAN_ATOL
+    )
+    np.testing.assert_allclose(
+        j_y, numerical_jacobian(x.local, y, n, True, False), atol=JACOBIAN_ATOL
+    )
+    np.testing.assert_allclose(j_x, -group.jl_inv(local), atol=1e-9)
+    value, j_x, j_y = x.interpolate_with_jacobians(y, 0.3)
+    assert_same_element(value, x.interpolate(y, 0.3))
+    np.testing.assert_allclose(
+        j_x,
+        numerical_jacobian(lambda a: a.interpolate(y, 0.3), x, n, True, True),
+        atol=JACOBIAN_ATOL,
+    )
+    np.testing.assert_allclose(
+        j_y,
+        numerical_jacobian(lambda b: x.interpolate(b, 0.3), y, n, True, True),
+        atol=JACOBIAN_ATOL,
+    )
+
+
+def test_bch_agrees_with_log_of_the_product_to_fourth_order(group, batch_shape, rng):
+    """|Log(Exp(tx) Exp(ty)) − bch(tx, ty)| = O(t⁴): halving t divides it by about 16."""
+    x, y = random_tangent(group, rng, batch_shape), random_tangent(group, rng, batch_shape)
+
+    def error(t: float) -> float:
+        exact = (group.exp(t * x) @ group.exp(t * y)).log()
+        return float(np.abs(exact - group.bch(t * x, t * y)).max())
+
+    coarse, fine = error(0.02), error(0.01)
+    assert fine < coarse / 12 or fine < 1e-13, (coarse, fine)
+    np.testing.assert_allclose(group.bch(x, np.zeros_like(x)), x, atol=1e-15)
