@@ -5,8 +5,10 @@ from importlib.metadata import PackageNotFoundError, version
 from .analysis.marginals import marginals, relative_covariances
 from .api import optimize
 from .graph import PoseGraph
+from .graph.information import information_from_sigmas
 from .io import GraphFileError, ReadOptions, load_graph, read_graph, write_graph
 from .lie import SE2, SE3, SO2, SO3, Sim3
+from .lie.gtsam_order import matrix_from_gtsam, matrix_to_gtsam
 from .robust.spec import RobustSpec
 from .sim3.scale_drift import correct_scale_drift
 from .smoother import Smoother
@@ -31,8 +33,11 @@ __all__ = [
     "Smoother",
     "SolverOptions",
     "correct_scale_drift",
+    "information_from_sigmas",
     "load_graph",
     "marginals",
+    "matrix_from_gtsam",
+    "matrix_to_gtsam",
     "optimize",
     "read_graph",
     "relative_covariances",

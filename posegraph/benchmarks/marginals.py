@@ -64,7 +64,8 @@ def run(
 def _compare_nodes(graph: PoseGraph, count: int, repeats: int) -> str:
     import gtsam
 
-    from ..validation.gtsam_bridge import graph_to_gtsam, matrix_from_gtsam
+    from ..lie.gtsam_order import matrix_from_gtsam
+    from ..validation.gtsam_bridge import graph_to_gtsam
 
     nodes = np.random.default_rng(0).choice(graph.node_ids[1:], count, replace=False)
     factors, values = graph_to_gtsam(graph)
@@ -81,7 +82,8 @@ def _compare_pairs(graph: PoseGraph, pairs: np.ndarray, label: str, repeats: int
     """Relative covariances of the node ``pairs`` (k, 2) (ids)."""
     import gtsam
 
-    from ..validation.gtsam_bridge import graph_to_gtsam, matrix_from_gtsam, to_gtsam
+    from ..lie.gtsam_order import matrix_from_gtsam
+    from ..validation.gtsam_bridge import graph_to_gtsam, to_gtsam
 
     factors, values = graph_to_gtsam(graph)
     poses = {int(k): to_gtsam(graph.values_of([k])[0]) for k in np.unique(pairs)}

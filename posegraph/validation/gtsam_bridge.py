@@ -1,9 +1,8 @@
 """Conversions between posegraph elements and gtsam 4.3 objects (CONVENTIONS.md, "Peer").
 
-* Rot2, Pose2: tangent (θ) and (vx, vy, θ), the same as ours.
-* Rot3: (φ). Pose3: gtsam's tangent is (ω, v); ours is (ρ, φ) = (v, ω).
+* Tangent orders: ``posegraph.lie.gtsam_order``.
 * Similarity3(R, t_g, s) is Eade's [[R, t_g], [0, 1/s]]; ours is N = [[sR, t], [0, 1]], so
-  t_g = t / s. Its tangent is (ω, u, λ); ours (ρ, φ, σ) = (u, ω, λ).
+  t_g = t / s.
 """
 
 from __future__ import annotations
@@ -14,15 +13,7 @@ import gtsam
 import numpy as np
 
 from ..lie import SE2, SE3, SO2, SO3, LieGroup, Sim3
-
-_TANGENT_ORDER = {
-    SO2: np.arange(1),
-    SE2: np.arange(3),
-    SO3: np.arange(3),
-    SE3: np.array([3, 4, 5, 0, 1, 2]),
-    Sim3: np.array([3, 4, 5, 0, 1, 2, 6]),
-}
-"""Index k of gtsam's tangent holds our component _TANGENT_ORDER[group][k]."""
+from ..lie.gtsam_order import matrix_to_gtsam, tangent_from_gtsam
 
 GTSAM_TYPE = {
     SO2: gtsam.Rot2,
@@ -31,30 +22,6 @@ GTSAM_TYPE = {
     SE3: gtsam.Pose3,
     Sim3: gtsam.Similarity3,
 }
-
-
-def tangent_permutation(group: type[LieGroup]) -> np.ndarray:
-    """P with ``ξ_gtsam = P ξ_ours``; a covariance or information maps as P Σ Pᵀ."""
-    return np.eye(group.dof)[_TANGENT_ORDER[group]]
-
-
-def tangent_to_gtsam(group: type[LieGroup], tangent: np.ndarray) -> np.ndarray:
-    return np.asarray(tangent, float)[..., _TANGENT_ORDER[group]]
-
-
-def tangent_from_gtsam(group: type[LieGroup], tangent: np.ndarray) -> np.ndarray:
-    return np.asarray(tangent, float)[..., np.argsort(_TANGENT_ORDER[group])]
-
-
-def matrix_to_gtsam(group: type[LieGroup], matrix: np.ndarray) -> np.ndarray:
-    """A (…, dof, dof) matrix over our tangent (covariance, information, Jacobian) in gtsam's."""
-    p = tangent_permutation(group)
-    return p @ matrix @ p.T
-
-
-def matrix_from_gtsam(group: type[LieGroup], matrix: np.ndarray) -> np.ndarray:
-    p = tangent_permutation(group)
-    return p.T @ matrix @ p
 
 
 def to_gtsam(element: LieGroup):

@@ -8,6 +8,7 @@ from posegraph_datasets.generators import manhattan_world
 from posegraph_datasets.outliers import add_false_loops
 
 import posegraph
+from posegraph.lie import gtsam_order
 from posegraph.robust.spec import robust_mask
 
 gtsam = pytest.importorskip("gtsam")
@@ -27,11 +28,11 @@ def test_marginals_equal_gtsam(shared_dataset, name, count):
     factors, values = bridge.graph_to_gtsam(graph)
     theirs = gtsam.Marginals(factors, values)
     for k, node in enumerate(nodes.tolist()):
-        expected = bridge.matrix_from_gtsam(graph.group, theirs.marginalCovariance(node))
+        expected = gtsam_order.matrix_from_gtsam(graph.group, theirs.marginalCovariance(node))
         np.testing.assert_allclose(ours[k], expected, rtol=1e-6, atol=1e-6 * np.abs(expected).max())
     together = nodes[: count // 2 if count > 10 else 2].tolist()
     joint = posegraph.marginals(graph, together, joint=True)
-    permutation = np.kron(np.eye(len(together)), bridge.tangent_permutation(graph.group))
+    permutation = np.kron(np.eye(len(together)), gtsam_order.tangent_permutation(graph.group))
     expected = permutation.T @ theirs.jointMarginalCovariance(together).fullMatrix() @ permutation
     np.testing.assert_allclose(joint, expected, rtol=1e-6, atol=1e-6 * np.abs(expected).max())
 
@@ -52,7 +53,7 @@ def test_marginals_after_a_robust_solve_weigh_edges_as_gtsams_robust_noise_model
     )
     theirs = gtsam.Marginals(factors, values)
     for k, node in enumerate(nodes.tolist()):
-        expected = bridge.matrix_from_gtsam(corrupted.group, theirs.marginalCovariance(node))
+        expected = gtsam_order.matrix_from_gtsam(corrupted.group, theirs.marginalCovariance(node))
         np.testing.assert_allclose(ours[k], expected, rtol=1e-6, atol=1e-6 * np.abs(expected).max())
 
 
@@ -94,5 +95,7 @@ def test_relative_covariances_equal_gtsams_joint_marginals_through_its_between(
         covariance = np.block([[joint.at(a, a), joint.at(a, b)], [joint.at(b, a), joint.at(b, b)]])
         poses = (bridge.to_gtsam(graph.values_of([node])[0]) for node in (a, b))
         derivative = _derivative_of_between(*poses)
-        expected = bridge.matrix_from_gtsam(graph.group, derivative @ covariance @ derivative.T)
+        expected = gtsam_order.matrix_from_gtsam(
+            graph.group, derivative @ covariance @ derivative.T
+        )
         np.testing.assert_allclose(ours[k], expected, rtol=1e-6, atol=1e-6 * np.abs(expected).max())
