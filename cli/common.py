@@ -23,7 +23,7 @@ from posegraph.lie import LieGroup
 from posegraph.solvers import SolverOptions, Summary
 
 from .errors import UsageError, warn
-from .progress import Progress
+from .progress import LEAST_SQUARES, Progress
 
 Kept = tuple[np.ndarray, np.ndarray]
 """Masks over a file's between edges and priors of those solved (not set aside)."""
@@ -42,7 +42,7 @@ def read_options(args: argparse.Namespace) -> ReadOptions:
 
 class Inputs:
     """A command's input files, read with its options. What lenient reading skipped is kept for
-    the JSON document (``skipped_lines``) and, with ``warn_skipped``, as a warning (``warnings``)
+    the JSON document (``skipped_lines``) and, with ``warn_skipped``, as a warning (``warn``)
     that ``emit`` prints before the results, which leave out what those lines say (a node
     whose vertex line was skipped keeps its edges). A command that stops prints its one line
     of error alone."""
@@ -57,6 +57,10 @@ class Inputs:
         self.skipped_lines: list[dict] = []
         self.warnings: list[str] = []
 
+    def warn(self, message: str) -> None:
+        """A finding about the inputs, for ``emit`` to print (text mode) with the results."""
+        self.warnings.append(message)
+
     def graph(self, path: str) -> ReadResult:
         read = load_graph(path, self.options)
         self.skipped_lines += [
@@ -65,7 +69,7 @@ class Inputs:
         ]
         if read.skipped and self.warn_skipped:
             report = read.skipped_report()
-            self.warnings.append(f"{path}: {report}; the results leave out what those lines say")
+            self.warn(f"{path}: {report}; the results leave out what those lines say")
         return read
 
     def trajectory(self, path: str) -> Trajectory:
@@ -170,7 +174,7 @@ def check_drop_rejected(args: argparse.Namespace) -> None:
         return
     if args.robust is None:
         raise UsageError("--drop-rejected needs --robust: only a robust run rejects measurements")
-    if args.output is None or output_format(args.output) not in GRAPH_FORMATS:
+    if args.output is None or output_format(args.output, args.to) not in GRAPH_FORMATS:
         raise UsageError(
             "--drop-rejected leaves the rejected edges out of the graph that -o writes: give -o a"
             " g2o or TORO file",
@@ -214,7 +218,7 @@ def output_graph(
         full.fixed = graph.fixed.copy()
         edges, priors = _spread(edges, kept[0]), _spread(priors, kept[1])
         graph = full
-    if not (edges.any() or priors.any()):
+    if not (edges.any() or priors.any()) or args.output is None:
         return graph, None, args.output
     marked = np.count_nonzero(edges) + np.count_nonzero(priors)
     return graph, (edges, priors), f"{args.output} ({marked} marked rejected)"
@@ -266,6 +270,14 @@ def solving_options(args: argparse.Namespace) -> dict:
         method=args.solver, max_iterations=args.max_iterations, time_limit=args.time_limit
     )
     return {"init": args.init, "options": options, "robust": robust}
+
+
+def cost_label(args: argparse.Namespace) -> str:
+    """How progress names the cost of a solve that has no stage: least squares', or an
+    M-estimator's ½Σρ."""
+    if args.robust is None or args.robust.startswith("gnc"):
+        return LEAST_SQUARES
+    return "½Σ ρ"
 
 
 def noting_interruption(progress: Progress, summary: Summary) -> Summary:

@@ -45,12 +45,13 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _run(argv: list[str] | None) -> int:
-    from . import commands
+    from . import commands, data
     from .parser import parser
     from .scale_drift import scale_drift
 
     args = parser().parse_args(argv)
-    handler = scale_drift if args.command == "scale-drift" else getattr(commands, args.command)
+    handlers = {"scale-drift": scale_drift, "generate": data.generate, "datasets": data.datasets}
+    handler = handlers.get(args.command) or getattr(commands, args.command)
     return _handle(args, handler)
 
 

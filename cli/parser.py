@@ -9,41 +9,20 @@ from typing import NamedTuple
 import posegraph
 from posegraph.benchmarks.optimizer import METHODS as BENCHMARK_METHODS
 from posegraph.benchmarks.timing import add_timing_arguments, at_least
-from posegraph.init.choice import INITIALIZERS
-from posegraph.io.tags import EDGE2_ORDERS
-from posegraph.solvers.options import METHODS
 from posegraph.trajectory.evaluation import KITTI_SEGMENT_LENGTHS, MAX_KEY_DIFFERENCE
 
-EXAMPLES = {
-    "optimize": """examples:
-  posegraph optimize datasets/sphere_small.g2o -o optimised.g2o --plot optimised.png
-  posegraph optimize city.graph -o city.g2o --init odometry --max-iterations 50 --json
-  posegraph optimize garage.g2o -o out.g2o --fix 0 17 --g2o-rotation-information
-  posegraph optimize intel.g2o -o out.g2o --robust gnc --covariances covariances.txt
-  posegraph optimize false_loops.g2o -o inliers.g2o --robust gnc --drop-rejected --plot gnc.png""",
-    "info": """examples:
-  posegraph info datasets/manhattan_small.g2o
-  posegraph info broken.g2o --lenient --json""",
-    "convert": """examples:
-  posegraph convert intel.g2o intel.graph          # g2o -> TORO
-  posegraph convert sphere.g2o sphere.tum          # poses as TUM: id tx ty tz qx qy qz qw
-  posegraph convert sphere.g2o poses.txt --to kitti""",
-    "plot": """examples:
-  posegraph plot before.g2o after.g2o -o overlay.png
-  posegraph plot garage.g2o -o top.png --view top""",
-    "eval": """examples:
-  posegraph eval optimised.g2o groundtruth.tum
-  posegraph eval estimate.tum groundtruth.tum --align sim3 --plot ate.png --json
-  posegraph eval KeyFrameTrajectory.txt groundtruth.txt --align sim3 --max-time-difference 0.01""",
-    "scale-drift": """examples:
-  python -m posegraph_datasets.monocular monocular.g2o groundtruth.tum  # a generated sequence
-  posegraph scale-drift monocular.g2o -o corrected.tum --gt groundtruth.tum --plot drift.png
-  posegraph scale-drift monocular.g2o -o corrected.g2o --convention camera_from_world --json
-  posegraph scale-drift place_recognition.g2o -o corrected.tum --robust gnc  # false loops""",
-    "bench": """examples:
-  posegraph bench --graphs sphere2500 parking-garage --repeats 3
-  posegraph bench --solver dogleg --json""",
-}
+from . import options
+from .examples import EXAMPLES
+
+PLOT_MODES = ("xy", "xz", "yz", "xyz")
+"""``eval --plot-mode``: ``posegraph.plotting.PLOT_MODES``, named here so that the parser does
+not import matplotlib."""
+
+ODOMETRY_SIGMAS = (0.1, 0.01)
+"""``convert``'s default standard deviations of a trajectory's odometry edges."""
+
+GENERATED = ("sphere", "grid", "manhattan", "monocular", "false-loops")
+"""What ``generate`` makes."""
 
 
 class _Groups(NamedTuple):
@@ -62,129 +41,39 @@ def parser() -> argparse.ArgumentParser:
         epilog="Run 'posegraph COMMAND --help' for a command's options and examples.",
     )
     top.add_argument("--version", action="version", version=f"posegraph {posegraph.__version__}")
-    groups = _Groups(_common(), _reading(), _solving())
+    groups = _Groups(options.common(), options.reading(), options.solving())
     sub = top.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for add in (_optimize, _info, _convert, _plot, _eval, _scale_drift, _bench):
+    for add in (
+        _optimize,
+        _info,
+        _convert,
+        _plot,
+        _eval,
+        _scale_drift,
+        _bench,
+        _generate,
+        _datasets,
+    ):
         add(sub, groups)
     return top
 
 
+ALIASES = {"optimize": ["optimise"]}
+"""Other spellings of a command (British English)."""
+
+
 def _command(sub, name: str, help_text: str, parents) -> argparse.ArgumentParser:
-    return sub.add_parser(
+    command = sub.add_parser(
         name,
+        aliases=ALIASES.get(name, []),
         help=help_text,
         description=help_text,
         parents=parents,
         epilog=EXAMPLES[name],
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-
-
-def _common() -> argparse.ArgumentParser:
-    """Options of every command: the output's form."""
-    common = argparse.ArgumentParser(add_help=False)
-    common.add_argument(
-        "--json", action="store_true", help="print one JSON document (README: schema)"
-    )
-    common.add_argument("--quiet", action="store_true", help="print nothing but errors")
-    common.add_argument("--debug", action="store_true", help="show tracebacks")
-    return common
-
-
-def _reading() -> argparse.ArgumentParser:
-    """Options of every command that reads files."""
-    reading = argparse.ArgumentParser(add_help=False)
-    reading.add_argument(
-        "--lenient",
-        action="store_true",
-        help="skip bad lines instead of stopping (a warning, or skipped_lines in --json, lists them)",
-    )
-    reading.add_argument(
-        "--g2o-rotation-information",
-        action="store_true",
-        help="weigh SE3 rotation information as g2o does (Λ_φφ = Λ_qq/4)",
-    )
-    reading.add_argument(
-        "--identity-information",
-        action="store_true",
-        help="weigh every edge and prior by the identity, ignoring the file's information "
-        "(as TORO's -ic); lines may then omit it",
-    )
-    reading.add_argument(
-        "--edge2-order",
-        choices=list(EDGE2_ORDERS),
-        default="toro",
-        help="order of the information values on EDGE2 lines: toro (I11 I12 I22 I33 I13 I23, "
-        "default) or g2o (I11 I12 I13 I22 I23 I33, as gtsam's readG2o reads them)",
-    )
-    reading.add_argument(
-        "--repair-information",
-        choices=["psd", "isotropic"],
-        help="repair information matrices instead of refusing them: psd clips the eigenvalues of"
-        " those not positive semi-definite; isotropic gives every measurement SE-Sync's model"
-        " (one translation and one rotation precision)",
-    )
-    reading.add_argument(
-        "--scale-information",
-        type=float,
-        help="information on log-scale of SE3 edges lifted to Sim3, in files mixing SE3 and Sim3 "
-        "lines (and, for scale-drift, in SE3 files): 1/σ², σ the relative scale drift per edge "
-        "(default: from their translation information, or the scale change the Sim3 loops "
-        "call for where that is larger; the reports show it)",
-    )
-    return reading
-
-
-def _solving() -> argparse.ArgumentParser:
-    """Options of the commands that optimise."""
-    solving = argparse.ArgumentParser(add_help=False)
-    solving.add_argument(
-        "--solver",
-        choices=METHODS,
-        default="lm",
-        help="lm (Levenberg-Marquardt, default), gn (Gauss-Newton) or dogleg (Powell's, in a"
-        " trust region: one factorisation per linearisation)",
-    )
-    solving.add_argument(
-        "--init",
-        choices=INITIALIZERS,
-        default="auto",
-        help="default: auto (chordal relaxation when the graph has loops, else odometry)",
-    )
-    solving.add_argument(
-        "--robust",
-        metavar="KERNEL[:WIDTH]",
-        help="gnc (truncated least squares by graduated non-convexity), huber, cauchy, "
-        "geman-mcclure, tukey or dcs; width in Mahalanobis units (default √χ²_k(0.999) for "
-        "gnc, √χ²_k(0.95) for the others, k the directions a measurement weighs: 3 for an SE3 "
-        "position-only fix)",
-    )
-    solving.add_argument(
-        "--robust-edges",
-        choices=["loops", "all"],
-        default="loops",
-        help="edges the kernel applies to (default: loops, i.e. not between consecutive nodes)",
-    )
-    solving.add_argument(
-        "--robust-priors",
-        action="store_true",
-        help="apply the kernel to the priors too (absolute fixes such as GNSS)",
-    )
-    solving.add_argument(
-        "--drop-rejected",
-        action="store_true",
-        help="leave the edges and priors that --robust rejected out of -o's graph (g2o or TORO);"
-        " without it they are written commented out, marked rejected",
-    )
-    solving.add_argument(
-        "--readmit-rejected",
-        action="store_true",
-        help="solve with the edges and priors that the file marks rejected (by default they are"
-        " set aside, as the robust run that marked them did, and written back marked)",
-    )
-    solving.add_argument("--max-iterations", type=at_least(0), default=100, help="default: 100")
-    solving.add_argument("--time-limit", type=at_least(0, float), help="seconds")
-    return solving
+    command.set_defaults(command=name)  # an alias runs, and reports as, the command
+    return command
 
 
 def _optimize(sub, groups: _Groups) -> None:
@@ -196,7 +85,10 @@ def _optimize(sub, groups: _Groups) -> None:
         [groups.common, groups.reading, groups.solving],
     )
     opt.add_argument("input", help="g2o or TORO file")
-    opt.add_argument("-o", "--output", help="write the optimised graph here (format by suffix)")
+    opt.add_argument(
+        "-o", "--output", help="write the optimised graph, or its poses, here (format by suffix)"
+    )
+    options.output_format(opt)
     opt.add_argument(
         "--covariances",
         metavar="FILE",
@@ -238,12 +130,21 @@ def _convert(sub, groups: _Groups) -> None:
     conv = _command(
         sub,
         "convert",
-        "convert g2o <-> TORO, or export poses as TUM or KITTI",
+        "convert g2o <-> TORO, export poses as TUM or KITTI, or make a graph of a trajectory",
         [groups.common, groups.reading],
     )
     conv.add_argument("input")
     conv.add_argument("output")
-    conv.add_argument("--to", choices=["g2o", "toro", "tum", "kitti"], help="default: by suffix")
+    options.output_format(conv)
+    conv.add_argument(
+        "--sigmas",
+        type=float,
+        nargs=2,
+        default=list(ODOMETRY_SIGMAS),
+        metavar=("TRANSLATION", "ROTATION"),
+        help="a trajectory converted to a graph: the standard deviations of its odometry edges,"
+        " in the trajectory's unit and in radians (default %(default)s)",
+    )
     conv.add_argument("--sim3-dialect", choices=["a", "b"], default="a", help="for Sim3 g2o output")
     conv.add_argument("--overwrite", action="store_true", help="allow the output to be the input")
 
@@ -251,7 +152,10 @@ def _convert(sub, groups: _Groups) -> None:
 def _plot(sub, groups: _Groups) -> None:
     """``plot``."""
     plot = _command(
-        sub, "plot", "draw one graph or overlay several", [groups.common, groups.reading]
+        sub,
+        "plot",
+        "draw graphs and trajectories (TUM, KITTI, EuRoC), one or overlaid",
+        [groups.common, groups.reading],
     )
     plot.add_argument("inputs", nargs="+", metavar="input")
     plot.add_argument("-o", "--output", required=True, metavar="FIG.png")
@@ -267,8 +171,8 @@ def _eval(sub, groups: _Groups) -> None:
         "ATE, RPE and KITTI drift of an estimate against ground truth",
         [groups.common, groups.reading],
     )
-    ev.add_argument("estimate", help="g2o, TORO, TUM or KITTI")
-    ev.add_argument("ground_truth", help="g2o, TORO, TUM or KITTI")
+    ev.add_argument("estimate", help="g2o, TORO, TUM, KITTI or EuRoC (.csv)")
+    ev.add_argument("ground_truth", help="g2o, TORO, TUM, KITTI or EuRoC (.csv)")
     ev.add_argument("--align", choices=["se3", "sim3", "none"], default="se3", help="default: se3")
     ev.add_argument("--delta", type=at_least(1), default=1, help="RPE step in poses (default 1)")
     ev.add_argument(
@@ -288,7 +192,30 @@ def _eval(sub, groups: _Groups) -> None:
         help="path lengths of the drift's segments, in the trajectories' unit (default the KITTI"
         " benchmark's 100 200 … 800)",
     )
-    ev.add_argument("--plot", metavar="FIG.png")
+    ev.add_argument(
+        "--match-by-index",
+        action="store_true",
+        help="pair the k-th pose of the estimate with the k-th of the ground truth, over the"
+        " shorter (KITTI files of different lengths are refused without it)",
+    )
+    ev.add_argument(
+        "--plot",
+        metavar="FIG.png",
+        help="the ground truth and the estimate coloured by its error, and the error over the"
+        " distance travelled (as evo_ape --plot)",
+    )
+    ev.add_argument(
+        "--plot-mode",
+        choices=list(PLOT_MODES),
+        default="xy",
+        help="the axes the trajectories are drawn on (default xy, top-down)",
+    )
+    ev.add_argument(
+        "--plot-colormap-max",
+        type=at_least(0, float),
+        metavar="ERROR",
+        help="the error at the top of the colour scale (default: the largest)",
+    )
 
 
 def _scale_drift(sub, groups: _Groups) -> None:
@@ -305,6 +232,7 @@ def _scale_drift(sub, groups: _Groups) -> None:
     drift.add_argument(
         "-o", "--output", help=".tum/.kitti: corrected poses; .g2o: the optimised Sim3 graph"
     )
+    options.output_format(drift)
     drift.add_argument(
         "--gt", metavar="GT", help="ground truth (TUM, KITTI or g2o) to report ATE before/after"
     )
@@ -332,4 +260,69 @@ def _bench(sub, groups: _Groups) -> None:
         choices=BENCHMARK_METHODS,
         default="lm",
         help="posegraph's and gtsam's: Levenberg-Marquardt (default) or dogleg",
+    )
+
+
+def _generate(sub, groups: _Groups) -> None:
+    """``generate``."""
+    gen = _command(
+        sub, "generate", "write a generated graph with its ground truth", [groups.common]
+    )
+    gen.add_argument(
+        "kind",
+        choices=GENERATED,
+        help="sphere (SE3 rings on a sphere, as sphere2500), grid (SE3 cubic lattice, as"
+        " smallGrid3D), manhattan (SE2 grid world, as M3500), monocular (SE3 odometry with scale"
+        " drift and Sim3 loops, for scale-drift), false-loops (--from's graph with false loop"
+        " closures appended)",
+    )
+    gen.add_argument("output", help="the graph to write (.g2o, or .graph for TORO)")
+    gen.add_argument("--truth", metavar="FILE", help="also write the ground truth (.tum or .kitti)")
+    gen.add_argument("--seed", type=int, default=0, help="default: 0")
+    gen.add_argument(
+        "--size",
+        type=at_least(2),
+        help="sphere: rings of 20 poses (default 10); grid: poses along each side (default 5);"
+        " manhattan: cells along each side of the world (default 12)",
+    )
+    gen.add_argument(
+        "--poses", type=at_least(2), default=300, help="manhattan, monocular: poses (default 300)"
+    )
+    gen.add_argument(
+        "--drift",
+        type=float,
+        default=0.01,
+        help="monocular: relative scale change per keyframe (default 0.01)",
+    )
+    gen.add_argument("--from", dest="source", metavar="GRAPH", help="false-loops: the graph")
+    gen.add_argument(
+        "--fraction",
+        type=float,
+        default=0.1,
+        help="false-loops: their share of all loop closures (default 0.1)",
+    )
+    gen.add_argument(
+        "--shape",
+        choices=["project", "anywhere"],
+        default="project",
+        help="false-loops: project (random relative poses within the extent of the graph's"
+        " edges, between any two nodes) or anywhere (within the map's extent, half between"
+        " nodes 2-20 ids apart)",
+    )
+
+
+def _datasets(sub, groups: _Groups) -> None:
+    """``datasets``."""
+    data = _command(
+        sub,
+        "datasets",
+        "list or download the standard benchmark graphs (SE-Sync's data/ folder)",
+        [groups.common],
+    )
+    data.add_argument("action", choices=["list", "download"])
+    data.add_argument("names", nargs="*", metavar="NAME", help="graphs to download, or all")
+    data.add_argument(
+        "--to",
+        metavar="FOLDER",
+        help="download here (default: $POSEGRAPH_DATASETS, or ~/.cache/posegraph/datasets)",
     )

@@ -24,6 +24,7 @@ from .common import (
     check_output,
     check_paths,
     check_writable,
+    cost_label,
     emit,
     noting_interruption,
     output_graph,
@@ -45,7 +46,7 @@ NO_SIM3_EDGE = (
 
 def scale_drift(args: argparse.Namespace) -> int:
     check_paths([args.input, args.gt], {"-o": args.output, "--plot": args.plot}, args.overwrite)
-    check_output(args.output)
+    check_output(args.output, args.to)
     check_output(args.plot, figure=True)
     check_drop_rejected(args)
     solving = solving_options(args)
@@ -53,12 +54,14 @@ def scale_drift(args: argparse.Namespace) -> int:
     read = inputs.graph(args.input)
     graph, kept = set_aside_rejected(read, args.readmit_rejected)
     if graph.group is posegraph.SE3:
-        inputs.warnings.append(f"{args.input}: {NO_SIM3_EDGE}")
+        inputs.warn(f"{args.input}: {NO_SIM3_EDGE}")
     if graph.group is not posegraph.SE2:  # refused below, by the correction
-        check_writable(args.input, graph, args.output, group=posegraph.Sim3)
+        check_writable(args.input, graph, args.output, args.to, posegraph.Sim3)
     truth = inputs.trajectory(args.gt) if args.gt else None  # read before the work
     before = Trajectory.of_graph(graph)
-    with Progress(talks(args), args.solver) as progress:
+    progress = Progress(talks(args), args.solver, args.max_iterations, cost_label(args))
+    with progress, progress.interruptible():
+        progress.begin("initialising")
         with about(args.input):  # a graph it cannot correct (SE2), values beyond doubles
             correction = correct_scale_drift(
                 graph, args.scale_information, args.convention, callback=progress, **solving
@@ -111,7 +114,7 @@ def _write_corrected(
         source = lift_graph(source, correction.lifted_scale_information)
     output, rejected, wrote = output_graph(args, correction.smoother, source, kept)
     if args.output:
-        written = output_format(args.output)
+        written = output_format(args.output, args.to)
         if written in ("tum", "kitti"):
             write_trajectory(after, args.output, written)
         else:

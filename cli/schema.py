@@ -331,11 +331,45 @@ SCHEMAS = {
     },
     "bench": {
         "type": "object",
-        "required": ["command", "solver", "table"],
+        "required": ["command", "solver", "gtsam", "table"],
         "properties": {
             "command": {"const": "bench"},
             "solver": {"enum": ["lm", "dogleg"]},
+            "gtsam": {"type": "boolean"},
             "table": {"type": "string"},
+        },
+    },
+    "generate": {
+        "type": "object",
+        "required": ["command", "kind", "output", "truth", "nodes", "edges", "false_edges"],
+        "properties": {
+            "command": {"const": "generate"},
+            "kind": {"enum": ["sphere", "grid", "manhattan", "monocular", "false-loops"]},
+            "truth": {"type": ["string", "null"]},
+            "nodes": {"type": "integer"},
+            "edges": {"type": "integer"},
+            "false_edges": {"type": "integer"},
+        },
+    },
+    "datasets": {
+        "type": "object",
+        "required": ["command", "action", "graphs"],
+        "properties": {
+            "command": {"const": "datasets"},
+            "action": {"enum": ["list", "download"]},
+            "folder": {"type": "string"},
+            "graphs": {
+                "type": "array",
+                "items": {
+                    "type": "object",
+                    "required": ["name", "path"],
+                    "properties": {
+                        "name": {"type": "string"},
+                        "path": {"type": ["string", "null"]},
+                        "downloaded": {"type": "boolean"},
+                    },
+                },
+            },
         },
     },
 }

@@ -4,6 +4,8 @@
   with loop closures wherever it comes back to a cell it visited before.
 * ``sphere``: poses on the surface of a sphere, ring after ring (the sphere2500 benchmark's
   shape), with loop closures between neighbouring rings.
+* ``grid``: poses at the points of a cubic lattice, visited row by row (the shape of the
+  tinyGrid3D and smallGrid3D benchmarks), with loop closures between lattice neighbours.
 
 Both return the graph, with initial values from composing the noisy odometry, and the truth.
 ``resimulate`` gives any graph a known ground truth: it keeps the graph's edges and information
@@ -146,6 +148,41 @@ def sphere(
     above = np.arange(poses_per_ring, count)
     i = np.concatenate([np.arange(count - 1), above - poses_per_ring])
     j = np.concatenate([np.arange(1, count), above])
+    sigmas = np.array([translation_sigma] * 3 + [rotation_sigma] * 3)
+    return _noisy_graph(truth, i, j, sigmas, rng), truth
+
+
+def grid(
+    size: int = 5,
+    spacing: float = 1.0,
+    translation_sigma: float = 0.05,
+    rotation_sigma: float = 0.01,
+    seed: int = 0,
+) -> tuple[PoseGraph, SE3]:
+    """``size``³ poses on a cubic lattice of ``spacing``, visited row by row, each row the other
+    way than the last, each pose facing along +x; every pose after the first closes a loop with
+    each lattice neighbour visited earlier that is not its predecessor."""
+    rng = np.random.default_rng(seed)
+    order = []
+    for z in range(size):
+        for y in range(size):
+            row = [(x, y, z) for x in range(size)]
+            order += row if (z * size + y) % 2 == 0 else row[::-1]
+    points = np.array(order)
+    count = len(order)
+    index = {point: k for k, point in enumerate(order)}
+    loops_i, loops_j = [], []
+    for k, point in enumerate(order):
+        for axis in range(3):
+            neighbour = list(point)
+            neighbour[axis] -= 1
+            earlier = index.get(tuple(neighbour), count)
+            if earlier < k - 1:
+                loops_i.append(earlier)
+                loops_j.append(k)
+    truth = SE3(np.broadcast_to(np.eye(3), (count, 3, 3)).copy(), spacing * points.astype(float))
+    i = np.concatenate([np.arange(count - 1), loops_i]).astype(np.int64)
+    j = np.concatenate([np.arange(1, count), loops_j]).astype(np.int64)
     sigmas = np.array([translation_sigma] * 3 + [rotation_sigma] * 3)
     return _noisy_graph(truth, i, j, sigmas, rng), truth
 

@@ -173,9 +173,10 @@ def monocular_sequence(
 
 
 def write_sequence(
-    sequence: MonocularSequence, graph_path: str, truth_path: str, dialect: str = "a"
+    sequence: MonocularSequence, graph_path: str, truth_path: str | None, dialect: str = "a"
 ) -> None:
-    """The g2o file (SE3 odometry with EDGE_SIM3 loops) and the ground truth as TUM."""
+    """The g2o file (SE3 odometry with EDGE_SIM3 loops) and, unless ``truth_path`` is None, the
+    ground truth as TUM (or as KITTI, by its suffix ``.kitti``)."""
     ids = sequence.odometry.node_ids
     loops = sim3_edge_lines(
         ids[sequence.loop_i],
@@ -185,7 +186,9 @@ def write_sequence(
         dialect,
     )
     atomic_write_text(graph_path, format_g2o(sequence.odometry) + "\n".join(loops) + "\n")
-    write_trajectory(Trajectory.of_graph(sequence.odometry, sequence.truth), truth_path, "tum")
+    if truth_path is not None:
+        truth = Trajectory.of_graph(sequence.odometry, sequence.truth)
+        write_trajectory(truth, truth_path, "kitti" if truth_path.endswith(".kitti") else "tum")
 
 
 def main(arguments: list[str] | None = None) -> None:

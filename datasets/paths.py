@@ -49,6 +49,19 @@ def shared_datasets_dir() -> Path | None:
     return None
 
 
+def benchmark_graph(name: str) -> Path | None:
+    """The benchmark graph file ``name`` (``sphere2500.g2o``) in ``shared_datasets_dir()`` or,
+    fetched by ``posegraph datasets download``, in ``download.download_dir()``; None if neither
+    holds it."""
+    from .download import download_dir
+
+    shared = shared_datasets_dir()
+    for folder in ([shared] if shared is not None else []) + [download_dir()]:
+        if (folder / name).is_file():
+            return folder / name
+    return None
+
+
 def gtsam_data_dir() -> Path | None:
     """The ``Data/`` folder of the installed gtsam wheel, if gtsam is installed."""
     try:

@@ -28,9 +28,10 @@ from .graph import (
 )
 from .io.atomic import atomic_path  # noqa: E402
 from .io.reader import ReadResult  # noqa: E402
-from .io.trajectories import as_se3  # noqa: E402
-from .lie import SE2  # noqa: E402
+from .io.trajectories import Trajectory, as_se3  # noqa: E402
+from .lie import SE2, SE3  # noqa: E402
 from .smoother import Smoother  # noqa: E402
+from .trajectory.evaluation import Evaluation  # noqa: E402
 
 COLORS = ["tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown", "tab:olive"]
 REJECTED_COLOR = "tab:red"
@@ -106,8 +107,9 @@ def _finish(figure, axes, three_d: bool, title: str | None, path: str) -> None:
 
 
 def check_figure_path(path: str) -> None:
-    """Raise ``ValueError`` naming ``path`` if matplotlib cannot write its suffix's format."""
-    supported = FigureCanvasBase.get_supported_filetypes()
+    """Raise ``ValueError`` naming ``path`` if matplotlib cannot write its suffix's format, nor
+    is it ``.html`` (``plot_graphs``' interactive figure)."""
+    supported = {**FigureCanvasBase.get_supported_filetypes(), "html": "interactive (plotly)"}
     suffix = Path(path).suffix.lower().lstrip(".")
     if suffix not in supported:
         raise ValueError(
@@ -126,12 +128,17 @@ def save_figure(figure, path: str) -> None:
         plt.close(figure)
 
 
-Drawn = PoseGraph | Smoother | ReadResult
-"""What a figure draws: a graph; a smoother, with what its last robust solve rejected; or a
-file read, with what its lines mark rejected (``ReadResult.rejected``)."""
+Drawn = PoseGraph | Smoother | ReadResult | Trajectory
+"""What a figure draws: a graph; a smoother, with what its last robust solve rejected; a file
+read, with what its lines mark rejected (``ReadResult.rejected``); or a trajectory."""
 
 
 def _graph(drawn: Drawn) -> PoseGraph:
+    """The graph drawn; a trajectory is drawn as the graph of its poses alone."""
+    if isinstance(drawn, Trajectory):
+        graph = PoseGraph(SE3)
+        graph.add_nodes(np.arange(len(drawn.keys)), drawn.poses)
+        return graph
     return drawn if isinstance(drawn, PoseGraph) else drawn.graph
 
 
@@ -150,12 +157,19 @@ def plot_graphs(
     path: str,
     title: str | None = None,
     view: str = "auto",
+    covariances: np.ndarray | None = None,
 ) -> None:
     """Overlay pose graphs (label, ``Drawn``) in one figure written to ``path``; what a
     smoother's last robust solve rejected, or a file's lines mark rejected, is drawn dashed
-    and circled."""
+    and circled. Drawn top-down, the last graph's poses get the ellipses of their marginal
+    ``covariances`` (one (d, d) matrix per node, over the tangent) where given."""
     drawn = [(label, _graph(item), _rejected(item)) for label, item in graphs]
-    three_d = view == "3d" or (view == "auto" and any(g.group is not SE2 for _, g, _ in drawn))
+    if Path(path).suffix.lower() == ".html":
+        from .interactive import write_html
+
+        write_html(drawn, path, title)
+        return
+    three_d = view == "3d" or (view == "auto" and not all(_planar(g) for _, g, _ in drawn))
     figure, axes = _new_axes(three_d)
     drawn_priors: list[np.ndarray] = []
     for k, (label, graph, (rejected_edges, rejected_priors)) in enumerate(drawn):
@@ -164,10 +178,10 @@ def plot_graphs(
         loop = ~odometry_mask(graph)
         kept = loop & ~rejected_edges
         loops = _segments(positions, graph.edges.i[kept], graph.edges.j[kept])
-        count = f"{loop.sum()} loop closures"
+        count = f" ({loop.sum()} loop closures" if graph.num_edges else ""
         if rejected_edges[loop].any():
             count += f", {np.count_nonzero(rejected_edges[loop])} rejected"
-        _draw(axes, three_d, positions, loops, color, f"{label} ({count})")
+        _draw(axes, three_d, positions, loops, color, f"{label}{count}{')' if count else ''}")
         fixes = as_se3(graph.priors.measurements).translation[:, : 3 if three_d else 2]
         if len(fixes) and not any(np.array_equal(fixes, other) for other in drawn_priors):
             axes.scatter(*fixes.T, marker="x", color=color, label=f"{len(fixes)} priors")
@@ -176,7 +190,59 @@ def plot_graphs(
             positions, graph.edges.i[rejected_edges], graph.edges.j[rejected_edges]
         )
         _draw_rejected(axes, three_d, rejected, fixes[rejected_priors])
+    if covariances is not None and not three_d:
+        _draw_ellipses(axes, drawn[-1][1], covariances, COLORS[(len(drawn) - 1) % len(COLORS)])
     _finish(figure, axes, three_d, title, path)
+
+
+ELLIPSE_SCALE = float(np.sqrt(5.991))
+"""Half-axes of a position ellipse in standard deviations: √χ²₂(0.95), the 95% region."""
+
+MAX_ELLIPSES = 150
+"""At most this many ellipses, at evenly spaced poses, so that they stay readable."""
+
+
+def position_ellipse(rotation: np.ndarray, covariance: np.ndarray) -> tuple[float, float, float]:
+    """The 95% ellipse of a planar position: (major axis, minor axis, the major axis' angle in
+    degrees from x), for a pose of 2 × 2 ``rotation`` whose (2, 2) ``covariance`` is over the
+    translation part ρ of the tangent of X·Exp(δ); the position moves by R·ρ, so its world-frame
+    covariance is R Σ_ρρ Rᵀ."""
+    variances, directions = np.linalg.eigh(rotation @ covariance @ rotation.T)
+    minor, major = 2 * ELLIPSE_SCALE * np.sqrt(np.clip(variances, 0, None))
+    angle = float(np.degrees(np.arctan2(directions[1, 1], directions[0, 1])))
+    return float(major), float(minor), angle
+
+
+def _draw_ellipses(axes, graph: PoseGraph, covariances: np.ndarray, color: str) -> None:
+    """The 95% ellipses of the horizontal positions of (at most ``MAX_ELLIPSES``) poses."""
+    from matplotlib.patches import Ellipse
+
+    poses = as_se3(graph.values)
+    every = max(1, graph.num_nodes // MAX_ELLIPSES)
+    label = "95% position ellipses"
+    for k in range(0, graph.num_nodes, every):
+        major, minor, angle = position_ellipse(poses.rotation[k, :2, :2], covariances[k, :2, :2])
+        if major <= 0:
+            continue  # a held node
+        axes.add_patch(
+            Ellipse(
+                poses.translation[k, :2],
+                major,
+                minor,
+                angle=angle,
+                fill=False,
+                edgecolor=color,
+                linewidth=0.6,
+                alpha=0.8,
+                label=label,
+            )
+        )
+        label = None
+
+
+def _planar(graph: PoseGraph) -> bool:
+    """Whether a graph is drawn flat: SE2, or poses that keep to one height."""
+    return graph.group is SE2 or bool(np.ptp(as_se3(graph.values).translation[:, 2]) <= 1e-9)
 
 
 def plot_trajectories(
@@ -193,3 +259,68 @@ def plot_trajectories(
     for k, (label, positions) in enumerate(trajectories):
         _draw(axes, three_d, positions, None, COLORS[k % len(COLORS)], label)
     _finish(figure, axes, three_d, title, path)
+
+
+PLOT_MODES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2), "xyz": (0, 1, 2)}
+"""The axes a trajectory is drawn on, as evo's ``--plot_mode``."""
+
+
+def plot_evaluation(
+    evaluation: Evaluation,
+    truth: np.ndarray,
+    path: str,
+    mode: str = "xy",
+    colormap_max: float | None = None,
+    title: str | None = None,
+) -> None:
+    """The figure of ``posegraph eval`` (as evo's ``evo_ape --plot``): the whole ground truth
+    (``truth``, (N, 3) positions) dashed in grey and the aligned estimate coloured by each
+    pose's ATE, from 0 to ``colormap_max`` (default the largest), on the axes of ``mode``;
+    beside it, the ATE against the distance travelled along the ground truth, with its RMSE,
+    mean and median."""
+    axes_of = PLOT_MODES[mode]
+    three_d = len(axes_of) == 3
+    figure = plt.figure(figsize=(13, 5.5), dpi=110)
+    trajectory = figure.add_subplot(1, 2, 1, projection="3d" if three_d else None)
+    errors = evaluation.ate_errors
+    estimate = evaluation.aligned_estimate.translation[:, axes_of]
+    trajectory.plot(*truth[:, axes_of].T, "--", color="0.45", linewidth=1.0, label="ground truth")
+    segments = np.stack([estimate[:-1], estimate[1:]], axis=1)
+    norm = plt.Normalize(0.0, colormap_max or max(float(errors.max()), 1e-12))
+    colors = (Line3DCollection if three_d else LineCollection)(
+        segments, cmap="jet", norm=norm, linewidths=1.6, label="estimate"
+    )
+    colors.set_array((errors[:-1] + errors[1:]) / 2)
+    trajectory.add_collection(colors)
+    figure.colorbar(colors, ax=trajectory, label="ATE", shrink=0.8)
+    names = "xyz"
+    trajectory.set_xlabel(names[axes_of[0]])
+    trajectory.set_ylabel(names[axes_of[1]])
+    if three_d:
+        trajectory.set_zlabel("z")
+        trajectory.auto_scale_xyz(*estimate.T)
+    else:
+        trajectory.set_aspect("equal", adjustable="datalim")
+        trajectory.autoscale_view()
+    trajectory.legend(loc="best", fontsize="small")
+    trajectory.set_title(f"{evaluation.alignment}-aligned estimate, coloured by ATE")
+
+    over_distance = figure.add_subplot(1, 2, 2)
+    over_distance.plot(evaluation.distance_travelled, errors, color="tab:blue", linewidth=1.0)
+    statistics = evaluation.ate
+    for value, name, style in (
+        (statistics.rmse, "rmse", "-"),
+        (statistics.mean, "mean", "--"),
+        (statistics.median, "median", ":"),
+    ):
+        over_distance.axhline(
+            value, linestyle=style, color="0.3", linewidth=0.9, label=f"{name} {value:.4g}"
+        )
+    over_distance.set_xlabel("distance travelled along the ground truth")
+    over_distance.set_ylabel("ATE")
+    over_distance.set_ylim(bottom=0)
+    over_distance.legend(loc="best", fontsize="small")
+    over_distance.set_title("ATE over distance")
+    if title:
+        figure.suptitle(title)
+    save_figure(figure, path)

@@ -19,7 +19,7 @@ import math
 import time
 from pathlib import Path
 
-from posegraph_datasets.paths import BENCHMARK_GRAPHS, gtsam_data_dir, shared_datasets_dir
+from posegraph_datasets.paths import BENCHMARK_GRAPHS, benchmark_graph, gtsam_data_dir
 
 from ..api import optimize
 from ..graph import PoseGraph
@@ -40,11 +40,9 @@ EDGE2 information in g2o's order, as gtsam's ``readG2o`` reads it."""
 
 
 def benchmark_files() -> list[Path]:
-    """The shared benchmark graphs and ``GTSAM_GRAPHS``, where present."""
-    files = []
-    shared = shared_datasets_dir()
-    if shared is not None:
-        files += [shared / name for name in BENCHMARK_GRAPHS]
+    """The benchmark graphs (shared or downloaded) and ``GTSAM_GRAPHS``, where present."""
+    files = [benchmark_graph(name) for name in BENCHMARK_GRAPHS]
+    files = [file for file in files if file is not None]
     data = gtsam_data_dir()
     if data is not None:
         files += [data / name for name in GTSAM_GRAPHS]
@@ -94,20 +92,44 @@ def time_posegraph(
     return best, result.summary
 
 
+def gtsam_available() -> bool:
+    """Whether gtsam can be imported (``pip install 'posegraph[bench]'`` adds it)."""
+    try:
+        import gtsam  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+NO_GTSAM = (math.nan, 0, math.nan)
+"""gtsam's columns where it is not installed."""
+
+
 def side_by_side(
-    graph: PoseGraph, repeats: int, rounds: int, budget: float = 0.0, method: str = "lm"
+    graph: PoseGraph,
+    repeats: int,
+    rounds: int,
+    budget: float = 0.0,
+    method: str = "lm",
+    with_gtsam: bool = True,
 ) -> tuple[tuple[float, int, float], tuple[float, Summary], tuple[float, Summary]]:
-    """``time_gtsam``, then ``time_posegraph`` from the graph's values and with ``init="auto"``,
-    all with ``method``, taking turns for ``rounds`` rounds; the best of each: ((seconds,
-    iterations, error), (seconds, summary), (seconds, summary))."""
-    return taking_turns(
-        [
-            lambda: time_gtsam(graph, repeats, budget, method),
-            lambda: time_posegraph(graph, repeats, "file", budget, method),
-            lambda: time_posegraph(graph, repeats, "auto", budget, method),
-        ],
-        rounds,
-    )
+    """``time_gtsam`` (unless not ``with_gtsam``: ``NO_GTSAM``), then ``time_posegraph`` from
+    the graph's values and with ``init="auto"``, all with ``method``, taking turns for
+    ``rounds`` rounds; the best of each: ((seconds, iterations, error), (seconds, summary),
+    (seconds, summary))."""
+    timings = [
+        lambda: time_posegraph(graph, repeats, "file", budget, method),
+        lambda: time_posegraph(graph, repeats, "auto", budget, method),
+    ]
+    if with_gtsam:
+        timings.insert(0, lambda: time_gtsam(graph, repeats, budget, method))
+    results = taking_turns(timings, rounds)
+    return results if with_gtsam else (NO_GTSAM, *results)
+
+
+def _number(value: float, form: str) -> str:
+    """``value`` formatted, or "–" where there is none (NaN: gtsam absent or failed)."""
+    return "–" if math.isnan(value) else format(value, form)
 
 
 def run(
@@ -117,9 +139,11 @@ def run(
     budget: float = 0.0,
     echo: bool = False,
     method: str = "lm",
+    with_gtsam: bool = True,
 ) -> str:
-    """Benchmark every file with ``method`` ("lm" or "dogleg"); returns the markdown table,
-    printing it row by row if ``echo``."""
+    """Benchmark every file with ``method`` ("lm" or "dogleg"), against gtsam if
+    ``with_gtsam`` (its columns "–" otherwise); returns the markdown table, printing it row by
+    row if ``echo``."""
     table = MarkdownTable(
         "graph | read (ms) | gtsam (ms) | gtsam iters | gtsam error | posegraph (ms) | iters "
         "| posegraph error | rel. diff | time ratio "
@@ -132,7 +156,7 @@ def run(
         graph = load_graph(str(path), GTSAM_GRAPHS.get(path.name, ReadOptions())).graph
         read_time = time.perf_counter() - start
         (g_time, g_iters, g_error), (p_time, summary), (d_time, defaults) = side_by_side(
-            graph, repeats, rounds, budget, method
+            graph, repeats, rounds, budget, method, with_gtsam
         )
         phases = summary.phase_times
         split = " / ".join(
@@ -140,10 +164,12 @@ def run(
         )
         difference = (summary.final_error - g_error) / g_error
         table.add(
-            f"{path.name} | {1e3 * read_time:.2f} | {1e3 * g_time:.2f} | {g_iters} "
-            f"| {g_error:.10g} | {1e3 * p_time:.2f} | {summary.num_iterations} | {summary.final_error:.10g} "
-            f"| {difference:+.1e} | {p_time / g_time:.2f} | {split} "
-            f"| {1e3 * d_time:.2f} | {defaults.initialization} | {defaults.final_error:.10g} | {d_time / g_time:.2f}"
+            f"{path.name} | {1e3 * read_time:.2f} | {_number(1e3 * g_time, '.2f')} "
+            f"| {g_iters if with_gtsam else '–'} | {_number(g_error, '.10g')} "
+            f"| {1e3 * p_time:.2f} | {summary.num_iterations} | {summary.final_error:.10g} "
+            f"| {_number(difference, '+.1e')} | {_number(p_time / g_time, '.2f')} | {split} "
+            f"| {1e3 * d_time:.2f} | {defaults.initialization} | {defaults.final_error:.10g} "
+            f"| {_number(d_time / g_time, '.2f')}"
         )
     return str(table)
 
@@ -159,7 +185,7 @@ def main() -> None:
         files = [f for f in files if f.stem in args.graphs]
     if not files:
         raise SystemExit("no benchmark graphs found (../shared/datasets or gtsam's Data/)")
-    run(files, args.repeats, args.rounds, args.budget, echo=True, method=args.method)
+    run(files, args.repeats, args.rounds, args.budget, True, args.method, gtsam_available())
 
 
 if __name__ == "__main__":

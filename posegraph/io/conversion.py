@@ -1,5 +1,6 @@
 """File-format choice for conversion and evaluation: graphs (g2o, TORO) and trajectories
-(TUM, KITTI), told apart by suffix, or for ``.txt`` by the number of columns."""
+(TUM, KITTI, and EuRoC's CSV to read), told apart by suffix, or for ``.txt`` by the number of
+columns."""
 
 from __future__ import annotations
 
@@ -16,8 +17,10 @@ from .trajectories import Trajectory, read_trajectory, write_trajectory
 from .writer import GRAPH_SUFFIXES, Rejected, unwritable, write_graph
 
 SUFFIX_FORMATS = {**GRAPH_SUFFIXES, ".tum": "tum", ".kitti": "kitti"}
+INPUT_SUFFIX_FORMATS = {**SUFFIX_FORMATS, ".csv": "euroc"}
 GRAPH_FORMATS = ("g2o", "toro")
 TRAJECTORY_FORMATS = ("tum", "kitti")
+"""The trajectory formats written; ``euroc`` is read too."""
 
 
 def output_format(path: str, requested: str | None = None) -> str:
@@ -34,10 +37,11 @@ def output_format(path: str, requested: str | None = None) -> str:
 
 
 def input_format(path: str) -> str:
-    """g2o/TORO by their tags, TUM/KITTI by suffix or, for other suffixes, by column count."""
+    """g2o/TORO by their tags, TUM/KITTI/EuRoC by suffix (``.csv``: EuRoC) or, for other
+    suffixes, by column count."""
     suffix = Path(path).suffix.lower()
-    if suffix in SUFFIX_FORMATS:
-        return SUFFIX_FORMATS[suffix]
+    if suffix in INPUT_SUFFIX_FORMATS:
+        return INPUT_SUFFIX_FORMATS[suffix]
     lines = read_lines(path)
     if not lines:
         raise GraphFileError(path, None, "holds no poses")
@@ -81,6 +85,11 @@ def load_trajectory(path: str, read: Callable[[str], ReadResult] = load_graph) -
     file read by ``read`` (path → ``ReadResult``; its options and its record of what was
     skipped are the caller's)."""
     file_format = input_format(path)
-    if file_format in TRAJECTORY_FORMATS:
-        return read_trajectory(path, file_format)
-    return Trajectory.of_graph(read(path).graph)
+    if file_format in GRAPH_FORMATS:
+        return Trajectory.of_graph(read(path).graph)
+    return read_trajectory(path, file_format)
+
+
+def is_trajectory_file(path: str) -> bool:
+    """Whether ``path`` holds a trajectory (TUM, KITTI, EuRoC) rather than a graph."""
+    return input_format(path) not in GRAPH_FORMATS

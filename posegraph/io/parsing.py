@@ -96,7 +96,7 @@ which then read the graph without it; posegraph reads it back as rejected
 (``ReadResult.rejected``)."""
 
 
-def _code_lines(path: str, rejected: set[int] | None = None) -> Iterator[tuple[int, str]]:
+def code_lines(path: str, rejected: set[int] | None = None) -> Iterator[tuple[int, str]]:
     """(line number, text before any ``#``) of every line that is not blank or a comment.
     UTF-8, with or without a byte-order mark. Lines end at ``\n`` alone, as g2o, gtsam and
     editors count them (a form feed or U+2028 inside a line or a comment does not end it).
@@ -128,7 +128,7 @@ def read_lines(path: str) -> list[tuple[int, list[str]]]:
     character outside the formats' syntax (``_OUTSIDE_SYNTAX``) is refused, naming it; a line
     that starts with a tag is left to the graph reader."""
     lines = []
-    for number, code in _code_lines(path):
+    for number, code in code_lines(path):
         tokens = code.split()
         if not tokens[0][:1].isalpha() and not _all_in_syntax(code):
             checker = LineChecker(path, lenient=False)
@@ -142,9 +142,9 @@ def read_lines(path: str) -> list[tuple[int, list[str]]]:
 def read_tagged_lines(path: str, rejected: set[int] | None = None) -> list[tuple[int, str, str]]:
     """(line number, tag, the text after the tag) of every line that is not blank or a
     comment, as ``read_lines`` finds them: three objects a line instead of one a token. Lines
-    marked rejected are read too, their numbers added to ``rejected`` (``_code_lines``)."""
+    marked rejected are read too, their numbers added to ``rejected`` (``code_lines``)."""
     tagged = []
-    for number, code in _code_lines(path, rejected):
+    for number, code in code_lines(path, rejected):
         tag, *rest = code.split(None, 1)
         tagged.append((number, tag, rest[0] if rest else ""))
     return tagged

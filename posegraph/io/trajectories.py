@@ -1,7 +1,10 @@
-"""Trajectory files: TUM (``t tx ty tz qx qy qz qw``) and KITTI (3 × 4 row-major [R | t]).
+"""Trajectory files: TUM (``t tx ty tz qx qy qz qw``), KITTI (3 × 4 row-major [R | t]) and,
+read only, EuRoC's ground-truth CSV (``timestamp [ns], px, py, pz, qw, qx, qy, qz, …``, as
+evo's ``euroc`` reader takes its first eight columns).
 
 A trajectory is a pair (keys, SE3 poses). For TUM the key is the time stamp column; a pose
 graph's export writes node ids there. KITTI lines have no key: the line index is the key.
+EuRoC's time stamps, in nanoseconds, become seconds.
 """
 
 from __future__ import annotations
@@ -15,7 +18,7 @@ import numpy as np
 from ..lie import SE2, SE3, LieGroup, Sim3
 from .atomic import atomic_write_text
 from .errors import GraphFileError
-from .parsing import paused_garbage_collection, quaternion_problems, read_lines
+from .parsing import code_lines, paused_garbage_collection, quaternion_problems, read_lines
 from .writer import number_fields, refuse_non_finite, written_finite
 
 if TYPE_CHECKING:
@@ -138,21 +141,46 @@ def _refuse_non_rotations(path: str, lines: list, rotation: np.ndarray) -> None:
     raise GraphFileError(path, lines[k][0], f"the 3 × 3 block {why}")
 
 
+def _euroc_lines(path: str) -> list[tuple[int, list[str]]]:
+    """(line number, its first eight comma-separated fields) of a EuRoC CSV's data lines."""
+    lines = []
+    for number, code in code_lines(path):
+        fields = [field.strip() for field in code.split(",")]
+        if len(fields) < 8:
+            raise GraphFileError(
+                path,
+                number,
+                f"EuRoC lines have at least 8 comma-separated values, found {len(fields)}",
+            )
+        lines.append((number, fields[:8]))
+    return lines
+
+
+def _stamped(
+    path: str, lines: list, stamps: np.ndarray, q: np.ndarray, t: np.ndarray
+) -> Trajectory:
+    """Time-stamped poses from quaternions (x, y, z, w) and translations; raise naming the first
+    line whose quaternion is not a rotation."""
+    problems = quaternion_problems(q)
+    if problems:
+        first = min(problems)
+        raise GraphFileError(path, lines[first][0], problems[first])
+    return Trajectory(stamps, SE3.from_quaternion_translation(q, t))
+
+
 def read_trajectory(path: str, file_format: str) -> Trajectory:
-    """Read "tum" or "kitti"; errors name ``file:line``."""
-    lines = read_lines(path)
-    width = {"tum": 8, "kitti": 12}[file_format]
+    """Read "tum", "kitti" or "euroc"; errors name ``file:line``."""
+    lines = _euroc_lines(path) if file_format == "euroc" else read_lines(path)
+    width = {"tum": 8, "kitti": 12, "euroc": 8}[file_format]
+    name = {"tum": "TUM", "kitti": "KITTI", "euroc": "EuRoC"}[file_format]
     if not lines:
-        raise GraphFileError(path, None, f"holds no {file_format.upper()} poses")
-    numbers = _numbers(path, lines, width, file_format.upper())
+        raise GraphFileError(path, None, f"holds no {name} poses")
+    numbers = _numbers(path, lines, width, name)
     if file_format == "tum":
-        problems = quaternion_problems(numbers[:, 4:8])
-        if problems:
-            first = min(problems)
-            raise GraphFileError(path, lines[first][0], problems[first])
-        return Trajectory(
-            numbers[:, 0], SE3.from_quaternion_translation(numbers[:, 4:8], numbers[:, 1:4])
-        )
+        return _stamped(path, lines, numbers[:, 0], numbers[:, 4:8], numbers[:, 1:4])
+    if file_format == "euroc":
+        q = numbers[:, [5, 6, 7, 4]]  # (w, x, y, z) → (x, y, z, w)
+        return _stamped(path, lines, numbers[:, 0] * 1e-9, q, numbers[:, 1:4])
     matrices = numbers.reshape(-1, 3, 4)
     rotation = matrices[:, :, :3]
     _refuse_non_rotations(path, lines, rotation)

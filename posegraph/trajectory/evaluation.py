@@ -88,6 +88,17 @@ class Evaluation:
     segment_lengths: tuple[float, ...]
     drift_by_length: tuple[Drift, ...]
     """Per length that a segment fits (``segment_drift``)."""
+    matched_truth: SE3
+    """The ground-truth poses paired with ``aligned_estimate``'s, in its order."""
+    ate_errors: np.ndarray
+    """Each paired pose's translation error after alignment (what ``ate`` summarises)."""
+
+    @property
+    def distance_travelled(self) -> np.ndarray:
+        """Path length along the paired ground truth up to each pose (for errors over
+        distance)."""
+        steps = np.linalg.norm(np.diff(self.matched_truth.translation, axis=0), axis=1)
+        return np.concatenate([[0.0], np.cumsum(steps)])
 
     @property
     def drift(self) -> Drift | None:
@@ -110,6 +121,14 @@ class Evaluation:
             "drift": None if self.drift is None else dataclasses.asdict(self.drift),
             "drift_by_length": [dataclasses.asdict(d) for d in self.drift_by_length],
         }
+
+
+def paired_by_index(estimate: Trajectory, truth: Trajectory) -> tuple[Trajectory, Trajectory]:
+    """The first n poses of each, n the shorter's length, keyed 0 … n−1, so that they pair by
+    index whatever their keys."""
+    count = min(len(estimate.keys), len(truth.keys))
+    keys = np.arange(count)
+    return Trajectory(keys, estimate.poses[:count]), Trajectory(keys, truth.poses[:count])
 
 
 def associate(
@@ -185,6 +204,8 @@ def evaluate(
         planar_ate_floor(est.translation, gt.translation),
         tuple(float(length) for length in segment_lengths),
         tuple(segment_drift(gt, aligned, segment_lengths)),
+        gt,
+        ate,
     )
 
 

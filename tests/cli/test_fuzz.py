@@ -11,10 +11,10 @@ pytest.importorskip("posegraph_cli")
 
 
 def test_mutants_of_every_format_keep_the_promises():
-    """For about 45 s: each command exits 0 with finite outputs or 2 with one line naming the
+    """For about 25 s: each command exits 0 with finite outputs or 2 with one line naming the
     file, and the readers return or raise ``GraphFileError``; no exit 3, hang, leftover
     output or changed input."""
-    report = soak(mutants=100_000, seed=20261127, budget=45.0)
+    report = soak(mutants=100_000, seed=20261127, budget=25.0)
     failures = [f"{label}: {outcome}\n{text}" for label, outcome, text in report.failures]
     assert not failures, "\n\n".join(failures[:3])
     assert report.mutants >= 100
