@@ -15,12 +15,6 @@ import sys
 import time
 from collections.abc import Iterator
 
-from rich.console import Console
-from rich.progress import Progress as RichProgress
-from rich.progress import ProgressColumn, SpinnerColumn, Task, TextColumn
-from rich.table import Column
-from rich.text import Text
-
 from posegraph.solvers import IterationRecord
 
 LEAST_SQUARES = "½Σ rᵀΩr"
@@ -31,16 +25,6 @@ with fixed weights (each GNC stage's, or one of its least-squares solves over a 
 
 _ROUND = re.compile(r"(?P<name>.+) round (?P<round>\d+) \((?P<start>.+)\)")
 """A GNC round's stage label: "gnc round 3 (warm)"."""
-
-
-class _Seconds(ProgressColumn):
-    """A stage's time so far, in seconds (stages are short: h:mm:ss would show 0:00:00)."""
-
-    def __init__(self) -> None:
-        super().__init__(table_column=Column(width=8, no_wrap=True))
-
-    def render(self, task: Task) -> Text:
-        return Text(f"{task.elapsed or 0.0:6.2f} s", style="progress.elapsed")
 
 
 class Progress:
@@ -63,7 +47,7 @@ class Progress:
         self.limit = limit
         self.cost = cost
         self.interrupted = False
-        self._display: RichProgress | None = None
+        self._display = None  # rich's Progress, on a terminal (``live.display``)
         self._task = None
         self._stage: str | None = None
         self._count = 0
@@ -73,16 +57,9 @@ class Progress:
 
     def __enter__(self) -> Progress:
         if self.live:
-            self._display = RichProgress(
-                SpinnerColumn(finished_text="✓", table_column=Column(width=1, no_wrap=True)),
-                TextColumn(
-                    "{task.description}",
-                    table_column=Column(width=24, no_wrap=True, overflow="ellipsis"),
-                ),
-                _Seconds(),
-                TextColumn("{task.fields[status]}", table_column=Column(no_wrap=True)),
-                console=Console(stderr=True),
-            )
+            from .live import display  # rich, imported only for a terminal
+
+            self._display = display()
             self._display.start()
         return self
 

@@ -1,0 +1,33 @@
+"""The terminal display of ``progress.Progress`` (rich): one row per stage, with a spinner that
+becomes a tick when the stage ends, its name, its seconds, and its status."""
+
+from __future__ import annotations
+
+from rich.console import Console
+from rich.progress import Progress, ProgressColumn, SpinnerColumn, Task, TextColumn
+from rich.table import Column
+from rich.text import Text
+
+
+class _Seconds(ProgressColumn):
+    """A stage's time so far, in seconds (stages are short: h:mm:ss would show 0:00:00)."""
+
+    def __init__(self) -> None:
+        super().__init__(table_column=Column(width=8, no_wrap=True))
+
+    def render(self, task: Task) -> Text:
+        return Text(f"{task.elapsed or 0.0:6.2f} s", style="progress.elapsed")
+
+
+def display() -> Progress:
+    """A rich progress display on stderr; its tasks carry a ``status`` field."""
+    return Progress(
+        SpinnerColumn(finished_text="✓", table_column=Column(width=1, no_wrap=True)),
+        TextColumn(
+            "{task.description}",
+            table_column=Column(width=24, no_wrap=True, overflow="ellipsis"),
+        ),
+        _Seconds(),
+        TextColumn("{task.fields[status]}", table_column=Column(no_wrap=True)),
+        console=Console(stderr=True),
+    )
