@@ -143,8 +143,9 @@ def _write_optimised(
 ) -> str | None:
     """``optimize``'s outputs, all written or none (``output_batch``): the graph (``-o``, what
     was rejected or set aside marked: ``output_graph``), the figure (with the covariances'
-    ellipses, when asked for) and the covariances. The graph is staged first, so that Ctrl-C during the later ones still writes the converged
-    result. Returns how the report names ``-o``."""
+    ellipses, when asked for) and the covariances. The graph is staged first, so that Ctrl-C
+    during the later ones still writes the converged result. Returns how the report names
+    ``-o``."""
     graph = smoother.graph
     output, rejected, wrote = output_graph(args, smoother, read.graph, kept)
     with output_batch():
