@@ -160,6 +160,20 @@ def _hangs_a_tree(i: np.ndarray, j: np.ndarray, old: int, count: int) -> bool:
         return False
     # The old nodes become node 0, and new node k becomes k − old + 1.
     ends = np.maximum(np.stack([i, j]) - old + 1, 0)
+    if new <= DIRECT_COMPOSITION:  # a few streamed poses: union-find, without scipy's overhead
+        root = list(range(new + 1))
+
+        def find(node: int) -> int:
+            while root[node] != node:
+                node = root[node]
+            return node
+
+        for a, b in ends.T.tolist():
+            ra, rb = find(a), find(b)
+            if ra == rb:
+                return False  # a cycle: with one edge per new node, some node is then left out
+            root[ra] = rb
+        return True
     adjacency = coo_matrix((np.ones(new), (ends[0], ends[1])), shape=(new + 1, new + 1))
     return connected_components(adjacency, directed=False)[0] == 1
 
@@ -181,10 +195,56 @@ def _agree_with_solution(graph: PoseGraph, solution: Solution) -> bool:
     return chi2(graph.values, new_edges, new_priors) <= default_width(dof, WARM_START_QUANTILE) ** 2
 
 
-def compose_new_nodes(graph: PoseGraph, new: np.ndarray) -> tuple[PoseGraph, np.ndarray]:
-    """Values for the ``new`` nodes (a mask), composed from the others along a spanning tree of
-    the edges that touch them (and set in the graph). Returns that local graph, the other nodes
-    held, with the new nodes' priors, and which of its nodes are new."""
+DIRECT_COMPOSITION = 64
+"""At most this many new nodes are composed one by one (``_compose_directly``); more, as a
+whole new map, go along a spanning tree."""
+
+
+def compose_new_nodes(graph: PoseGraph, new: np.ndarray) -> None:
+    """Values for the ``new`` nodes (a mask), composed from the others (and set in the graph):
+    directly where each hangs off a node with a value (``_compose_directly``: a pose or a few
+    streamed into a back end), else along a spanning tree of the edges that touch them, moved
+    onto their priors."""
+    if _compose_directly(graph, new):
+        return
+    local, local_new = _local_graph(graph, new)
+    solved = ~local_new
+    local.set_values(align_to_priors(local, spanning_tree_values(local, known=solved)), check=False)
+    graph.set_values(graph.values.set_at(np.flatnonzero(new), local.values[local_new]), check=False)
+
+
+def _compose_directly(graph: PoseGraph, new: np.ndarray) -> bool:
+    """Compose each new node in index order from one edge to a node that has a value by then
+    (the edge from the node before it if there is one, odometry, else the first), as a spanning
+    tree would along the same edges; False, and nothing set, where there are more than
+    ``DIRECT_COMPOSITION`` new nodes, a new node has a prior, or one has no such edge."""
+    indices = np.flatnonzero(new)
+    if indices.size > DIRECT_COMPOSITION or np.isin(graph.priors.i, indices).any():
+        return False
+    edges = graph.edges
+    touching = np.flatnonzero(new[edges.i] | new[edges.j])
+    i, j = edges.i[touching], edges.j[touching]
+    values, valued = graph.values, ~new
+    for node in indices.tolist():
+        forward = touching[(j == node) & valued[i]]  # Xⱼ = Xᵢ Z
+        backward = touching[(i == node) & valued[j]]  # Xᵢ = Xⱼ Z⁻¹
+        if forward.size:
+            edge = next((e for e in forward.tolist() if edges.i[e] == node - 1), int(forward[0]))
+            value = values[edges.i[edge]] @ edges.measurements[edge]
+        elif backward.size:
+            edge = int(backward[0])
+            value = values[edges.j[edge]] @ edges.measurements[edge].inverse()
+        else:
+            return False
+        values = values.set_at(node, value)
+        valued[node] = True
+    graph.set_values(values, check=False)
+    return True
+
+
+def _local_graph(graph: PoseGraph, new: np.ndarray) -> tuple[PoseGraph, np.ndarray]:
+    """The graph of the ``new`` nodes, the nodes they touch (held) and the edges between them,
+    with the new nodes' priors; and which of its nodes are new."""
     touching = new[graph.edges.i] | new[graph.edges.j]
     involved = new.copy()
     involved[graph.edges.i[touching]] = involved[graph.edges.j[touching]] = True
@@ -192,8 +252,6 @@ def compose_new_nodes(graph: PoseGraph, new: np.ndarray) -> tuple[PoseGraph, np.
     solved = ~new[involved]
     local.fixed = solved
     local.priors = local.priors.subset(~solved[local.priors.i])
-    local.set_values(align_to_priors(local, spanning_tree_values(local, known=solved)), check=False)
-    graph.set_values(graph.values.set_at(np.flatnonzero(new), local.values[~solved]), check=False)
     return local, ~solved
 
 
@@ -202,7 +260,8 @@ def _initialize_new_nodes(graph: PoseGraph, options: SolverOptions) -> None:
     a spanning tree (``compose_new_nodes``), then refine them alone (solved nodes held) over
     the edges that touch them, so that the full solve starts close to its optimum."""
     new = ~graph.initialized
-    local, local_new = compose_new_nodes(graph, new)
+    compose_new_nodes(graph, new)
+    local, local_new = _local_graph(graph, new)
     local_options = dataclasses.replace(
         options,
         relative_decrease=LOCAL_RELATIVE_DECREASE,

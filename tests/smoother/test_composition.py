@@ -1,0 +1,47 @@
+"""The warm start's composition of new nodes: the direct path for a few streamed poses agrees
+with the spanning tree's, and its tree test with scipy's connected components."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from posegraph_datasets.generators import manhattan_world
+
+from posegraph.init.spanning_tree import spanning_tree_values
+from posegraph.smoother import warm_start
+
+
+def test_direct_composition_equals_the_spanning_tree_along_the_same_edges():
+    """Nodes 0–29 solved, 30–39 new: each new node's edges include its odometry, and loops to
+    older nodes; both paths compose along odometry."""
+    graph, _ = manhattan_world(num_poses=40, seed=3)
+    new = np.arange(40) >= 30
+    expected = spanning_tree_values(graph, known=~new)
+    composed = graph.copy()
+    assert warm_start._compose_directly(composed, new)
+    for k in range(30, 40):
+        np.testing.assert_allclose(
+            composed.values[k].as_matrix(), expected[k].as_matrix(), atol=1e-9
+        )
+
+
+def test_direct_composition_declines_what_it_cannot_do():
+    graph, _ = manhattan_world(num_poses=40, seed=3)
+    unreachable = np.zeros(40, dtype=bool)
+    unreachable[[10, 11]] = True
+    graph.remove_edges((graph.edges.i == 10) | (graph.edges.j == 10))
+    assert not warm_start._compose_directly(graph, unreachable)  # node 10 hangs off nothing
+    many = np.arange(40) >= 40 - warm_start.DIRECT_COMPOSITION - 1
+    assert not warm_start._compose_directly(graph, many)
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_the_tree_test_agrees_with_connected_components(seed, monkeypatch):
+    """Random edge sets over 3 old nodes and up to 5 new ones: union-find and scipy agree."""
+    rng = np.random.default_rng(seed)
+    old, new = 3, int(rng.integers(1, 6))
+    count = old + new
+    i, j = rng.integers(0, count, size=(2, new))
+    fast = warm_start._hangs_a_tree(i, j, old, count)
+    monkeypatch.setattr(warm_start, "DIRECT_COMPOSITION", 0)
+    assert fast == warm_start._hangs_a_tree(i, j, old, count)
