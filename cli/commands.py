@@ -59,7 +59,7 @@ def optimize(args: argparse.Namespace) -> int:
     outputs = {"-o": args.output, "--plot": args.plot, "--covariances": args.covariances}
     check_paths([args.input], outputs, args.overwrite)
     check_output(args.output, args.to)
-    check_output(args.plot, figure=True)
+    check_output(args.plot, figure=True, interactive=True)
     check_output(args.covariances, text=True)
     check_drop_rejected(args)
     solving = solving_options(args)
@@ -235,7 +235,7 @@ def plot(args: argparse.Namespace) -> int:
     from posegraph.plotting import plot_graphs
 
     check_paths(args.inputs, {"-o": args.output}, None)
-    check_output(args.output, figure=True)
+    check_output(args.output, figure=True, interactive=True)
     inputs = Inputs(args)
     graphs = [  # a graph file's rejections too
         (os.path.basename(p), inputs.trajectory(p) if is_trajectory_file(p) else inputs.graph(p))

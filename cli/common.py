@@ -145,17 +145,19 @@ def check_output(
     figure: bool = False,
     text: bool = False,
     remedy: str = "",
+    interactive: bool = False,
 ) -> None:
     """Fail before any work if ``path`` cannot be written: a format not known by its suffix
-    (or ``to``; a ``figure``'s by matplotlib; ``text`` has one format; ``remedy`` follows that
-    refusal), a folder that does not exist, or a read-only file."""
+    (or ``to``; a ``figure``'s by matplotlib, or ``.html`` where it is ``interactive``; ``text``
+    has one format; ``remedy`` follows that refusal), a folder that does not exist, or a
+    read-only file."""
     if path is None:
         return
     try:
         if figure:
             from posegraph.plotting import check_figure_path
 
-            check_figure_path(path)
+            check_figure_path(path, interactive)
         elif not text:
             output_format(path, to)
     except ValueError as error:  # its message starts with the path, which UsageError adds

@@ -106,10 +106,12 @@ def _finish(figure, axes, three_d: bool, title: str | None, path: str) -> None:
     save_figure(figure, path)
 
 
-def check_figure_path(path: str) -> None:
-    """Raise ``ValueError`` naming ``path`` if matplotlib cannot write its suffix's format, nor
-    is it ``.html`` (``plot_graphs``' interactive figure)."""
-    supported = {**FigureCanvasBase.get_supported_filetypes(), "html": "interactive (plotly)"}
+def check_figure_path(path: str, interactive: bool = False) -> None:
+    """Raise ``ValueError`` naming ``path`` if matplotlib cannot write its suffix's format (nor,
+    where the figure has an ``interactive`` form, ``plot_graphs``', is it ``.html``)."""
+    supported = dict(FigureCanvasBase.get_supported_filetypes())
+    if interactive:
+        supported["html"] = "interactive (plotly)"
     suffix = Path(path).suffix.lower().lstrip(".")
     if suffix not in supported:
         raise ValueError(

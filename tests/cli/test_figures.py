@@ -104,3 +104,12 @@ def test_the_html_view_renders_in_headless_chromium(html_figure, tmp_path):
         rows // 4 : 3 * rows // 4, columns // 6 : columns // 2
     ]  # the graph, not the legend
     assert (scene.min(axis=2) < 0.8).mean() > 0.02
+
+
+def test_only_graph_figures_have_an_html_form(tmp_path):
+    """eval's and scale-drift's figures are matplotlib's: .html is refused before any work."""
+    graph, truth = tmp_path / "s.g2o", tmp_path / "truth.tum"
+    assert _quiet(["generate", "sphere", graph, "--size", "4", "--truth", truth]) == 0
+    assert _quiet(["eval", graph, truth, "--plot", tmp_path / "ate.html"]) == 2
+    assert _quiet(["scale-drift", graph, "--plot", tmp_path / "drift.html"]) == 2
+    assert not list(tmp_path.glob("*.html"))
