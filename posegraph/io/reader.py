@@ -258,5 +258,5 @@ def _unknown_tag_reason(tag: str, options: ReadOptions) -> str:
         return f"unknown tag {tag!r}{advice}"
     return (
         f"unknown tag {tag!r}: a line of numbers, as in a TUM or KITTI trajectory, not a g2o or"
-        " TORO graph"
+        " TORO graph ('posegraph convert TRAJECTORY graph.g2o' makes a graph of a trajectory)"
     )
