@@ -61,6 +61,9 @@ def test_datasets_download_checks_the_sha256_and_writes_nothing_on_a_mismatch(mi
         download.download("tinyGrid3D.g2o", tmp_path / "elsewhere")
     assert not (tmp_path / "elsewhere" / "tinyGrid3D.g2o").exists()
     assert main(["datasets", "download", "nosuchgraph"]) == 2
+    (mirror / "tinyGrid3D.g2o").unlink()  # the mirror lost it: one line naming the address
+    with pytest.raises(download.DownloadError, match="tinyGrid3D.g2o: cannot fetch"):
+        download.download("tinyGrid3D.g2o", tmp_path / "elsewhere")
     listed = json.loads(_run(["datasets", "list", "--json"])[1])["graphs"]
     assert listed == [{"name": "tinyGrid3D.g2o", "path": str(path)}]
 

@@ -1,5 +1,5 @@
-"""Trajectory files: KITTI blocks that are not rotations are refused naming their line, and node
-ids keep their 64 bits as trajectory keys."""
+"""Trajectory files: KITTI blocks that are not rotations are refused naming their line, node
+ids keep their 64 bits as trajectory keys, and EuRoC's ground truth reads as evo reads it."""
 
 from __future__ import annotations
 
@@ -68,3 +68,26 @@ def test_a_tum_time_stamp_that_cannot_hold_an_id_is_refused(tmp_path):
     assert not path.exists()
     convert(graph, str(tmp_path / "large_ids.kitti"))  # KITTI has no keys to lose
     assert read_trajectory(str(tmp_path / "large_ids.kitti"), "kitti").keys.size == 3
+
+
+def test_euroc_ground_truth_reads_its_first_eight_columns(tmp_path):
+    """EuRoC's state_groundtruth_estimate0/data.csv: a header, time stamps in ns, position, then
+    the quaternion w first; further columns (velocity, biases) are ignored."""
+    path = tmp_path / "data.csv"
+    path.write_text(
+        "#timestamp, p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS_x [], q_RS_y [],"
+        " q_RS_z [], v_RS_R_x [m s^-1]\n"
+        "1403636579758555392,4.688,-1.786,0.783,0.534,-0.153,-0.827,-0.082,0.1\n"
+        "1403636579763555584,4.689,-1.786,0.788,0.534,-0.153,-0.827,-0.082,0.1\n"
+    )
+    trajectory = read_trajectory(str(path), "euroc")
+    np.testing.assert_allclose(trajectory.keys, [1403636579.758555392, 1403636579.763555584])
+    np.testing.assert_allclose(trajectory.positions[1], [4.689, -1.786, 0.788])
+    q, _ = trajectory.poses[:1].as_quaternion_translation()
+    expected = np.array([-0.153, -0.827, -0.082, 0.534])
+    np.testing.assert_allclose(
+        np.abs(q[0]), np.abs(expected / np.linalg.norm(expected)), atol=1e-12
+    )
+    path.write_text("1403636579758555392,4.688,-1.786\n")
+    with pytest.raises(GraphFileError, match=r"data.csv:1: EuRoC lines have at least 8"):
+        read_trajectory(str(path), "euroc")
