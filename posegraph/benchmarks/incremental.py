@@ -173,16 +173,7 @@ def run(
         f"  last call reused: {', '.join(last_warm.reused) or 'nothing'}",
     ]
     if with_gtsam:
-        optimum = last_scratch.final_error
-        for method, (calls, error) in gtsam_stream(full, step).items():
-            seconds = float(np.sum(calls))
-            p99 = np.percentile(warm_calls, 99) / np.percentile(calls, 99)
-            lines.append(
-                f"  gtsam {_GTSAM_LABELS[method]}: total {seconds:.2f} s (posegraph's warm starts"
-                f" take {warm_total / seconds:.2f}×), final error {error:.10g}"
-                f" ({(error - optimum) / optimum:+.1e} relative to the scratch solution's);"
-                f" per call {_latency(calls)} (posegraph's p99 {p99:.2f}×)"
-            )
+        lines += _gtsam_lines(full, step, warm_calls, last_scratch.final_error)
     if robust is not None:
         streamed_false = false[np.argsort(arrivals(full, step)[1], kind="stable")]
         lines.append(
@@ -191,6 +182,21 @@ def run(
             f" {_rates(graph, streamed_false, last_scratch)} (scratch)"
         )
     return "\n".join(lines)
+
+
+def _gtsam_lines(full: PoseGraph, step: int, warm_calls: list[float], optimum: float) -> list[str]:
+    """The report of the same stream into gtsam (``gtsam_stream``), beside posegraph's calls."""
+    lines = []
+    for method, (calls, error) in gtsam_stream(full, step).items():
+        seconds = float(np.sum(calls))
+        p99 = np.percentile(warm_calls, 99) / np.percentile(calls, 99)
+        lines.append(
+            f"  gtsam {_GTSAM_LABELS[method]}: total {seconds:.2f} s (posegraph's warm starts"
+            f" take {np.sum(warm_calls) / seconds:.2f}×), final error {error:.10g}"
+            f" ({(error - optimum) / optimum:+.1e} relative to the scratch solution's);"
+            f" per call {_latency(calls)} (posegraph's p99 {p99:.2f}×)"
+        )
+    return lines
 
 
 def _latency(calls: list[float]) -> str:
