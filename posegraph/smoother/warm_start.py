@@ -14,7 +14,7 @@ from ..graph import PoseGraph, information_ranks, measured_dof
 from ..init.choice import choose, initialize
 from ..init.spanning_tree import align_to_priors, spanning_tree_values
 from ..problem.cholesky import resolve_backend
-from ..problem.factors import between_squares, chi2
+from ..problem.factors import between_squares, chi2, linearize_between
 from ..robust.kernels import default_width
 from ..robust.spec import Kernel
 from ..solvers import PHASES, Result, SolverOptions, Summary, solve
@@ -261,6 +261,10 @@ def _initialize_new_nodes(graph: PoseGraph, options: SolverOptions) -> None:
     the edges that touch them, so that the full solve starts close to its optimum."""
     new = ~graph.initialized
     compose_new_nodes(graph, new)
+    node = np.flatnonzero(new)
+    if node.size == 1 and not np.isin(node, graph.priors.i).any():
+        _refine_one(graph, int(node[0]), min(options.max_iterations, LOCAL_MAX_ITERATIONS))
+        return
     local, local_new = _local_graph(graph, new)
     local_options = dataclasses.replace(
         options,
@@ -271,3 +275,43 @@ def _initialize_new_nodes(graph: PoseGraph, options: SolverOptions) -> None:
     graph.set_values(
         graph.values.set_at(np.flatnonzero(new), refined.values[local_new]), check=False
     )
+
+
+def _refine_one(graph: PoseGraph, node: int, max_iterations: int) -> None:
+    """The local refinement of one new node (no prior on it), its neighbours held: Levenberg-
+    Marquardt on its d × d normal equations over the edges that touch it, with the local
+    solve's tolerance; a streamed pose spared the set-up of a whole solve."""
+    edges = graph.edges
+    local = edges.subset(np.flatnonzero((edges.i == node) | (edges.j == node)))
+    ends_at_i = (local.i == node)[:, None, None]
+    d = graph.group.dof
+
+    def linearized(value):
+        values = graph.values.set_at(node, value)
+        linearization = linearize_between(values, local)
+        r = linearization.residuals
+        jacobian = np.where(
+            ends_at_i, linearization.jacobians[..., :d], linearization.jacobians[..., d:]
+        )
+        weighted = local.information @ jacobian  # Ω J
+        hessian = np.einsum("mai,maj->ij", jacobian, weighted)
+        gradient = np.einsum("mai,ma->i", weighted, r)
+        return 0.5 * float(np.einsum("ma,mab,mb->", r, local.information, r)), hessian, gradient
+
+    value = graph.values[node]
+    cost, hessian, gradient = linearized(value)
+    damping = 1e-6
+    for _ in range(max_iterations):
+        damped = hessian + damping * np.diag(np.maximum(np.diag(hessian), 1e-12))
+        step = np.linalg.lstsq(damped, -gradient, rcond=None)[0]
+        trial = value.retract(step)
+        trial_cost, trial_hessian, trial_gradient = linearized(trial)
+        if not trial_cost < cost:
+            damping *= 10.0
+            continue
+        decrease = cost - trial_cost
+        value, cost, hessian, gradient = trial, trial_cost, trial_hessian, trial_gradient
+        damping = max(damping / 10.0, 1e-12)
+        if decrease <= LOCAL_RELATIVE_DECREASE * (cost + decrease):
+            break
+    graph.set_values(graph.values.set_at(node, value), check=False)

@@ -45,3 +45,24 @@ def test_the_tree_test_agrees_with_connected_components(seed, monkeypatch):
     fast = warm_start._hangs_a_tree(i, j, old, count)
     monkeypatch.setattr(warm_start, "DIRECT_COMPOSITION", 0)
     assert fast == warm_start._hangs_a_tree(i, j, old, count)
+
+
+def test_one_new_node_is_refined_to_the_local_optimum_of_a_whole_local_solve():
+    """A pose of a world with loops into it, taken as new: ``_refine_one`` ends where the local
+    Levenberg-Marquardt solve of ``_local_graph`` ends (run to convergence, from the same
+    composed start; 1e-6 on the pose)."""
+    from posegraph.solvers import SolverOptions, solve
+
+    graph, _ = manhattan_world(num_poses=120, seed=5)
+    degree = np.bincount(np.concatenate([graph.edges.i, graph.edges.j]), minlength=120)
+    last = int(np.argmax(degree))
+    assert degree[last] >= 3  # odometry both ways and a loop
+    new = np.arange(graph.num_nodes) == last
+    assert warm_start._compose_directly(graph, new)
+    local, local_new = warm_start._local_graph(graph, new)
+    tight = SolverOptions(relative_decrease=1e-12, max_iterations=50)
+    expected = solve(local, tight).values[local_new][0]
+    start = graph.values[last].as_matrix()
+    assert np.abs(start - expected.as_matrix()).max() > 1e-3  # the loop moves it
+    warm_start._refine_one(graph, last, 50)
+    np.testing.assert_allclose(graph.values[last].as_matrix(), expected.as_matrix(), atol=1e-6)
