@@ -13,8 +13,8 @@ from posegraph_datasets.paths import benchmark_graph
 import posegraph
 from posegraph.io import load_graph
 from posegraph.io.atomic import output_batch
+from posegraph.io.conversion import GRAPH_FORMATS, TRAJECTORY_FORMATS, output_format
 from posegraph.io.conversion import convert as convert_graph
-from posegraph.io.conversion import output_format
 from posegraph.io.trajectories import Trajectory, write_trajectory
 
 from .common import check_output, check_paths, emit
@@ -25,9 +25,9 @@ def generate(args: argparse.Namespace) -> int:
     check_paths([args.source], {"OUTPUT": args.output, "--truth": args.truth}, None)
     check_output(args.output, remedy="; give it a .g2o or .graph suffix")
     check_output(args.truth, remedy="; give it a .tum or .kitti suffix")
-    if output_format(args.output) not in ("g2o", "toro"):
+    if output_format(args.output) not in GRAPH_FORMATS:
         raise UsageError("generate writes a graph: give it a .g2o or .graph suffix", args.output)
-    if args.truth and output_format(args.truth) not in ("tum", "kitti"):
+    if args.truth and output_format(args.truth) not in TRAJECTORY_FORMATS:
         raise UsageError("the ground truth is a trajectory: .tum or .kitti", args.truth)
     false_edges = 0
     with output_batch():
@@ -74,7 +74,8 @@ def _monocular(args: argparse.Namespace) -> posegraph.PoseGraph:
     if output_format(args.output) != "g2o":
         raise UsageError("a monocular sequence has Sim3 loops, which only g2o holds", args.output)
     sequence = monocular.monocular_sequence(num_poses=args.poses, drift=args.drift, seed=args.seed)
-    monocular.write_sequence(sequence, args.output, args.truth)
+    truth_format = output_format(args.truth) if args.truth else "tum"
+    monocular.write_sequence(sequence, args.output, args.truth, truth_format=truth_format)
     return sequence.sim3_graph()
 
 

@@ -7,6 +7,7 @@ import argparse
 
 from posegraph.benchmarks.timing import at_least
 from posegraph.init.choice import INITIALIZERS
+from posegraph.io.conversion import GRAPH_FORMATS, TRAJECTORY_FORMATS
 from posegraph.io.tags import EDGE2_ORDERS
 from posegraph.solvers.options import METHODS
 
@@ -122,6 +123,6 @@ def output_format(command: argparse.ArgumentParser) -> None:
     """``--to``: the format of the output file."""
     command.add_argument(
         "--to",
-        choices=["g2o", "toro", "tum", "kitti"],
+        choices=[*GRAPH_FORMATS, *TRAJECTORY_FORMATS],
         help="the output's format (default: by its suffix: .g2o, .graph, .tum, .kitti)",
     )

@@ -173,10 +173,14 @@ def monocular_sequence(
 
 
 def write_sequence(
-    sequence: MonocularSequence, graph_path: str, truth_path: str | None, dialect: str = "a"
+    sequence: MonocularSequence,
+    graph_path: str,
+    truth_path: str | None,
+    dialect: str = "a",
+    truth_format: str = "tum",
 ) -> None:
     """The g2o file (SE3 odometry with EDGE_SIM3 loops) and, unless ``truth_path`` is None, the
-    ground truth as TUM (or as KITTI, by its suffix ``.kitti``)."""
+    ground truth as ``truth_format`` ("tum" or "kitti")."""
     ids = sequence.odometry.node_ids
     loops = sim3_edge_lines(
         ids[sequence.loop_i],
@@ -188,7 +192,7 @@ def write_sequence(
     atomic_write_text(graph_path, format_g2o(sequence.odometry) + "\n".join(loops) + "\n")
     if truth_path is not None:
         truth = Trajectory.of_graph(sequence.odometry, sequence.truth)
-        write_trajectory(truth, truth_path, "kitti" if truth_path.endswith(".kitti") else "tum")
+        write_trajectory(truth, truth_path, truth_format)
 
 
 def main(arguments: list[str] | None = None) -> None:

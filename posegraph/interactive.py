@@ -10,9 +10,6 @@ from .graph import PoseGraph, odometry_mask
 from .io.atomic import atomic_path
 from .io.trajectories import as_se3
 
-COLORS = ["#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#bcbd22"]
-REJECTED_COLOR = "#d62728"
-
 
 def _segments(positions: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
     """Segments i → j as one polyline broken by NaN rows (plotly draws no line across them)."""
@@ -24,15 +21,19 @@ def _segments(positions: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray
 def write_html(
     graphs: list[tuple[str, PoseGraph, tuple[np.ndarray, np.ndarray]]],
     path: str,
-    title: str | None = None,
+    title: str | None,
+    colors: list[str],
+    rejected_color: str,
 ) -> None:
     """Write the 3D figure of (label, graph, (rejected edge mask, rejected prior mask)) to
-    ``path`` as one HTML file that holds plotly.js (no network needed to view it)."""
+    ``path`` as one HTML file that holds plotly.js (no network needed to view it): graph k in
+    ``colors[k]`` (cycled), what was rejected in ``rejected_color``."""
     import plotly.graph_objects as go
 
     figure = go.Figure()
     for k, (label, graph, rejected) in enumerate(graphs):
-        for trace in _traces(label, graph, rejected, COLORS[k % len(COLORS)]):
+        color = colors[k % len(colors)]
+        for trace in _traces(label, graph, rejected, color, rejected_color):
             figure.add_trace(trace)
     figure.update_layout(
         title=title,
@@ -44,7 +45,13 @@ def write_html(
         figure.write_html(str(temporary), include_plotlyjs=True, full_html=True)
 
 
-def _traces(label: str, graph: PoseGraph, rejected: tuple[np.ndarray, np.ndarray], color: str):
+def _traces(
+    label: str,
+    graph: PoseGraph,
+    rejected: tuple[np.ndarray, np.ndarray],
+    color: str,
+    rejected_color: str,
+):
     """One graph's layers: its trajectory, its kept and rejected loop closures, its priors."""
     import plotly.graph_objects as go
 
@@ -63,7 +70,7 @@ def _traces(label: str, graph: PoseGraph, rejected: tuple[np.ndarray, np.ndarray
         (
             f"{label}: {np.count_nonzero(rejected_edges)} rejected",
             _segments(positions, edges.i[rejected_edges], edges.j[rejected_edges]),
-            dict(color=REJECTED_COLOR, width=2, dash="dash"),
+            dict(color=rejected_color, width=2, dash="dash"),
         ),
     ]
     for name, points, line in layers:
@@ -73,7 +80,7 @@ def _traces(label: str, graph: PoseGraph, rejected: tuple[np.ndarray, np.ndarray
     fixes = as_se3(graph.priors.measurements).translation
     if len(fixes):
         x, y, z = fixes.T
-        colors = np.where(rejected_priors, REJECTED_COLOR, color)
+        colors = np.where(rejected_priors, rejected_color, color)
         name = f"{label}: {len(fixes)} priors ({np.count_nonzero(rejected_priors)} rejected)"
         marker = dict(symbol="x", size=3, color=colors)
         yield go.Scatter3d(x=x, y=y, z=z, mode="markers", name=name, marker=marker)

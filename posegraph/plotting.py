@@ -167,9 +167,12 @@ def plot_graphs(
     ``covariances`` (one (d, d) matrix per node, over the tangent) where given."""
     drawn = [(label, _graph(item), _rejected(item)) for label, item in graphs]
     if Path(path).suffix.lower() == ".html":
+        from matplotlib.colors import to_hex
+
         from .interactive import write_html
 
-        write_html(drawn, path, title)
+        colors = [to_hex(color) for color in COLORS]  # plotly takes hex, not matplotlib's names
+        write_html(drawn, path, title, colors, to_hex(REJECTED_COLOR))
         return
     three_d = view == "3d" or (view == "auto" and not all(_planar(g) for _, g, _ in drawn))
     figure, axes = _new_axes(three_d)
@@ -244,7 +247,12 @@ def _draw_ellipses(axes, graph: PoseGraph, covariances: np.ndarray, color: str) 
 
 def _planar(graph: PoseGraph) -> bool:
     """Whether a graph is drawn flat: SE2, or poses that keep to one height."""
-    return graph.group is SE2 or bool(np.ptp(as_se3(graph.values).translation[:, 2]) <= 1e-9)
+    return graph.group is SE2 or _flat(as_se3(graph.values).translation)
+
+
+def _flat(positions: np.ndarray) -> bool:
+    """Whether (N, 3) positions keep to one height."""
+    return bool(np.ptp(positions[:, 2]) <= 1e-9)
 
 
 def plot_trajectories(
@@ -255,7 +263,7 @@ def plot_trajectories(
 ) -> None:
     """Overlay trajectories given as (label, (N, 3) positions); with ``view="auto"``, 3D unless
     all are planar."""
-    planar = all(np.ptp(p[:, 2]) <= 1e-9 for _, p in trajectories)
+    planar = all(_flat(p) for _, p in trajectories)
     three_d = view == "3d" or (view == "auto" and not planar)
     figure, axes = _new_axes(three_d)
     for k, (label, positions) in enumerate(trajectories):

@@ -196,8 +196,9 @@ def _agree_with_solution(graph: PoseGraph, solution: Solution) -> bool:
 
 
 DIRECT_COMPOSITION = 64
-"""At most this many new nodes are composed one by one (``_compose_directly``); more, as a
-whole new map, go along a spanning tree."""
+"""At most this many new nodes, a few streamed poses, are composed one by one
+(``_compose_directly``) and tested as a tree by a union-find (``_hangs_a_tree``); more, as a
+whole new map, go along a spanning tree and through scipy's connected components."""
 
 
 def compose_new_nodes(graph: PoseGraph, new: np.ndarray) -> None:
@@ -219,7 +220,7 @@ def _compose_directly(graph: PoseGraph, new: np.ndarray) -> bool:
     tree would along the same edges; False, and nothing set, where there are more than
     ``DIRECT_COMPOSITION`` new nodes, a new node has a prior, or one has no such edge."""
     indices = np.flatnonzero(new)
-    if indices.size > DIRECT_COMPOSITION or np.isin(graph.priors.i, indices).any():
+    if indices.size > DIRECT_COMPOSITION or _has_priors(graph, indices):
         return False
     edges = graph.edges
     touching = np.flatnonzero(new[edges.i] | new[edges.j])
@@ -242,6 +243,11 @@ def _compose_directly(graph: PoseGraph, new: np.ndarray) -> bool:
     return True
 
 
+def _has_priors(graph: PoseGraph, nodes: np.ndarray) -> bool:
+    """Whether a prior measures any of the node indices ``nodes``."""
+    return bool(np.isin(graph.priors.i, nodes).any())
+
+
 def _local_graph(graph: PoseGraph, new: np.ndarray) -> tuple[PoseGraph, np.ndarray]:
     """The graph of the ``new`` nodes, the nodes they touch (held) and the edges between them,
     with the new nodes' priors; and which of its nodes are new."""
@@ -262,7 +268,7 @@ def _initialize_new_nodes(graph: PoseGraph, options: SolverOptions) -> None:
     new = ~graph.initialized
     compose_new_nodes(graph, new)
     node = np.flatnonzero(new)
-    if node.size == 1 and not np.isin(node, graph.priors.i).any():
+    if node.size == 1 and not _has_priors(graph, node):
         _refine_one(graph, int(node[0]), min(options.max_iterations, LOCAL_MAX_ITERATIONS))
         return
     local, local_new = _local_graph(graph, new)
