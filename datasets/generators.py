@@ -8,6 +8,9 @@
   tinyGrid3D and smallGrid3D benchmarks), with loop closures between lattice neighbours.
 
 Both return the graph, with initial values from composing the noisy odometry, and the truth.
+* ``visual_odometry``: a wandering SE2 or SE3 trajectory whose loop closures all reach a few
+  poses back (a visual-odometry front end's), the stream a fixed-lag smoother takes.
+
 ``resimulate`` gives any graph a known ground truth: it keeps the graph's edges and information
 and draws new measurements around chosen true poses. ``docked`` adds a node that every pose
 measures: one dense row and column in an otherwise sparse problem.
@@ -185,6 +188,40 @@ def grid(
     j = np.concatenate([np.arange(1, count), loops_j]).astype(np.int64)
     sigmas = np.array([translation_sigma] * 3 + [rotation_sigma] * 3)
     return _noisy_graph(truth, i, j, sigmas, rng), truth
+
+
+def visual_odometry(
+    group: type[LieGroup],
+    poses: int = 200,
+    reach: int = 8,
+    loop_share: float = 0.35,
+    translation_sigma: float = 0.05,
+    rotation_sigma: float = 0.02,
+    seed: int = 0,
+) -> tuple[PoseGraph, LieGroup]:
+    """``poses`` SE2 or SE3 poses moving about 1 m forward per step with random turns; odometry
+    between consecutive poses and, from about ``loop_share`` of the poses, a loop closure to a
+    pose 2 to ``reach`` − 1 steps back. Pose 0 has a prior at its true value (σ = 0.01)."""
+    rng = np.random.default_rng(seed)
+    d = group.dof
+    rotation = 1 if group is SE2 else 3
+    forward = np.zeros(d)
+    forward[0] = 1.0
+    spread = np.r_[0.1, np.full(d - rotation - 1, 0.05), np.full(rotation, 0.3)]
+    motion = group.exp(forward + rng.normal(size=(poses - 1, d)) * spread)
+    truth = [group.identity()]
+    for step in motion:
+        truth.append(truth[-1] @ step)
+    truth = group.stack(truth)
+    later = np.flatnonzero(rng.random(poses) < loop_share)
+    later = later[later >= 3]
+    back = rng.integers(2, np.minimum(later, reach - 1) + 1)
+    i = np.concatenate([np.arange(poses - 1), later - back]).astype(np.int64)
+    j = np.concatenate([np.arange(1, poses), later]).astype(np.int64)
+    sigmas = np.r_[np.full(d - rotation, translation_sigma), np.full(rotation, rotation_sigma)]
+    graph = _noisy_graph(truth, i, j, sigmas, rng)
+    graph.add_prior(0, truth[0], np.eye(d) * 1e4)
+    return graph, truth
 
 
 def docked(

@@ -16,17 +16,10 @@ from ..robust.calibration import calibrate, kernel_classes
 from ..robust.kernels import Robustifier
 from ..robust.run import cost, robust_solve, with_robust_record
 from ..robust.spec import Kernel, RobustSpec, resolve
-from ..solvers import (
-    STOPPED,
-    TIME_LIMIT,
-    Callback,
-    IterationRecord,
-    Result,
-    SolverOptions,
-    Summary,
-    solve,
-)
+from ..solvers import STOPPED, TIME_LIMIT, Callback, Result, SolverOptions, solve
+from ..solvers.summary import in_turn
 from . import warm_start
+from .fixed_lag import FixedLag
 from .solution import GncProblem, Solution
 
 
@@ -54,10 +47,22 @@ class Smoother:
     normal equations, which a later call reuses while the graph's structure allows. Edit the
     graph directly to add; remove through the smoother (``remove_nodes``, ``remove_edges``,
     ``remove_priors``), which carries the last solution's weights and GNC's decisions to the
-    measurements that remain."""
+    measurements that remain.
 
-    def __init__(self, graph: PoseGraph) -> None:
+    With ``lag=K`` it is a fixed-lag smoother (``fixed_lag``): each call optimises the poses
+    not yet marginalised, then marginalises all but the newest K (in the graph's order) into a
+    Gaussian prior on the poses they reach, as gtsam's ``BatchFixedLagSmoother``; with
+    ``lag_seconds=T``, those stamped (``timestamps[node_id] = seconds``) more than T before the
+    newest. Marginalised poses keep their last estimate in the graph's values. Such a graph
+    only grows, and a new measurement may not reach a marginalised pose."""
+
+    def __init__(
+        self, graph: PoseGraph, lag: int | None = None, lag_seconds: float | None = None
+    ) -> None:
         self.graph = graph
+        fixed = lag is not None or lag_seconds is not None
+        self.fixed_lag = FixedLag(lag, lag_seconds) if fixed else None
+        """The fixed-lag state (``fixed_lag.FixedLag``), or None for a full smoother."""
         self.solution: Solution | None = None
         """What the last ``optimize`` left in the graph's values (None before the first)."""
         self._last: tuple[tuple[int, str], Result] | None = None
@@ -68,6 +73,13 @@ class Smoother:
         """Pickled and deep-copied without the last solve's normal equations (CHOLMOD handles
         cannot be pickled); a copy builds them anew on its next call and still warm-starts."""
         return {**self.__dict__, "_last": None}
+
+    @property
+    def timestamps(self) -> dict[int, float]:
+        """Each node's time in seconds, by node id, for a smoother with ``lag_seconds``."""
+        if self.fixed_lag is None or self.fixed_lag.seconds is None:
+            raise ValueError("timestamps belong to a Smoother made with lag_seconds")
+        return self.fixed_lag.timestamps
 
     @property
     def optimized(self) -> bool:
@@ -102,6 +114,8 @@ class Smoother:
             if isinstance(robust, str)
             else robust
         )
+        if self.fixed_lag is not None:
+            return self._optimize_window(init, options, spec, calibrate_noise)
         began = time.perf_counter()
         kernel = None if spec is None else resolve(spec, self.graph)  # checked before any work
         input_error = cost(self.graph, kernel) if self.graph.initialized.all() else None
@@ -128,6 +142,21 @@ class Smoother:
         gnc = GncProblem(kernel.spec, kernel.measured) if final else None
         self.solution = Solution(
             graph.edges, graph.priors, *weights, graph.fixed.copy(), result.values, summary, gnc
+        )
+        return result
+
+    def _optimize_window(
+        self, init: str, options: SolverOptions, spec: RobustSpec | None, calibrate_noise
+    ) -> Result:
+        """A fixed-lag smoother's call: least squares over the window from the values it has."""
+        if spec is not None or init != "auto" or calibrate_noise:
+            raise ValueError(
+                "a fixed-lag Smoother solves least squares from the values it holds: robust, "
+                "init and calibrate_noise are not supported with lag"
+            )
+        result, graph = self.fixed_lag.update(self.graph, options), self.graph
+        self.solution = Solution.least_squares(
+            graph.edges, graph.priors, graph.fixed.copy(), result.values, result.summary
         )
         return result
 
@@ -235,7 +264,7 @@ class Smoother:
         checking = time.perf_counter() - began - sum(s.total_time for s in summaries[1:])
         summary = dataclasses.replace(
             result.summary,
-            iterations=_in_turn(summaries),
+            iterations=in_turn(summaries),
             phase_times={**phases, "noise check": checking},
             noise=[c.as_dict() for c in noise],
             calibration=None if calibration is None else calibration.as_dict(),
@@ -338,6 +367,8 @@ class Smoother:
     def _carried(self) -> Solution | None:
         """The solution, if its measurements still come first and unchanged in the graph (a
         removal can then carry it); else None, and no later call carries it anyway."""
+        if self.fixed_lag is not None:
+            raise ValueError("a fixed-lag Smoother's graph only grows: nothing can be removed")
         solution, graph = self.solution, self.graph
         if solution is None or not (
             graph.edges.starts_with(solution.edges) and graph.priors.starts_with(solution.priors)
@@ -365,17 +396,3 @@ class Smoother:
             own(edges, len(solution.edges)),
             own(priors, len(solution.priors)),
         )
-
-
-def _in_turn(summaries: list[Summary]) -> list[IterationRecord]:
-    """The iterations of solves made one after another, numbered and timed from the first."""
-    records, offset = [], 0.0
-    for summary in summaries:
-        for record in summary.iterations:
-            records.append(
-                dataclasses.replace(
-                    record, iteration=len(records) + 1, elapsed=record.elapsed + offset
-                )
-            )
-        offset += summary.total_time
-    return records

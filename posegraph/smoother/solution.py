@@ -46,6 +46,13 @@ class Solution:
     """Whether ``values`` are the optimum over ``edges`` and ``priors``: False once a removal
     left what remains of it (``without``), so that a later call solves again."""
 
+    @classmethod
+    def least_squares(
+        cls, edges: EdgeSet, priors: EdgeSet, fixed: np.ndarray, values: LieGroup, summary: Summary
+    ) -> Solution:
+        """A least-squares solution: every measurement of weight 1."""
+        return cls(edges, priors, np.ones(len(edges)), np.ones(len(priors)), fixed, values, summary)
+
     def without(self, nodes: np.ndarray, edges: np.ndarray, priors: np.ndarray) -> Solution:
         """What remains of this solution once the nodes, edges and priors where these masks
         (over its own) hold were removed: the other measurements, renumbered, with their

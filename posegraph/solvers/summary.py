@@ -132,3 +132,17 @@ class Result:
         """Pickled and deep-copied without ``system`` (its factorisation holds CHOLMOD handles
         that cannot be pickled); a warm start from the copy builds the system anew."""
         return {**self.__dict__, "system": None}
+
+
+def in_turn(summaries: list[Summary]) -> list[IterationRecord]:
+    """The iterations of solves made one after another, numbered and timed from the first."""
+    records, offset = [], 0.0
+    for summary in summaries:
+        for record in summary.iterations:
+            records.append(
+                dataclasses.replace(
+                    record, iteration=len(records) + 1, elapsed=record.elapsed + offset
+                )
+            )
+        offset += summary.total_time
+    return records

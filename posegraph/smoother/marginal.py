@@ -1,0 +1,157 @@
+"""Quadratic models of a window's measurements over the tangents of its nodes, and the Gaussian
+prior that marginalising some of those nodes leaves on the others (Schur complement; Sibley,
+Matthies and Sukhatme 2010, "Sliding window filter", §3)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import scipy.sparse
+
+from ..graph import EdgeSet
+from ..lie import LieGroup
+from ..problem.factors import linearize_between, linearize_priors
+
+DENSE_SIZE = 1500
+"""Systems up to this many unknowns are held and solved dense, larger ones sparse."""
+
+
+@dataclasses.dataclass(frozen=True)
+class GaussianPrior:
+    """½ δᵀ H δ − gᵀ δ + c over the stacked tangents δ of ``nodes`` (graph indices) at their
+    linearisation points: what marginalisation leaves of the measurements it removed."""
+
+    nodes: np.ndarray
+    hessian: np.ndarray
+    gradient: np.ndarray
+    constant: float
+
+    def error(self, delta: np.ndarray) -> float:
+        """The prior's error at the nodes' tangents ``delta`` (len(nodes), d)."""
+        flat = delta.reshape(-1)
+        return float(0.5 * flat @ self.hessian @ flat - self.gradient @ flat + self.constant)
+
+
+@dataclasses.dataclass(frozen=True)
+class Quadratic:
+    """½ δᵀ H δ − gᵀ δ + c over the stacked tangents of n nodes (H n·d square): the
+    first-order model of measurements, ½ Σ ‖r + J δ‖²_Ω, around their linearisation point."""
+
+    hessian: np.ndarray | scipy.sparse.csr_matrix
+    gradient: np.ndarray
+    constant: float
+
+    def decrease(self, start: np.ndarray, end: np.ndarray) -> float:
+        """How much the model falls from tangents ``start`` to ``end`` (stacked)."""
+        step = end - start
+        return float(
+            self.gradient @ step
+            - 0.5 * (end @ (self.hessian @ end) - start @ (self.hessian @ start))
+        )
+
+
+def quadratic(
+    values: LieGroup,
+    edges: EdgeSet,
+    priors: EdgeSet,
+    position: np.ndarray,
+    prior: GaussianPrior | None = None,
+) -> Quadratic:
+    """The ``Quadratic`` of between ``edges`` and unary ``priors`` linearised at ``values`` (every
+    node's), plus a ``GaussianPrior``, over the nodes whose ``position`` (per node) is ≥ 0, in
+    that order; the others are constants. H is dense up to ``DENSE_SIZE`` unknowns."""
+    d, n = values.dof, int(position.max(initial=-1)) + 1
+    between, unary = linearize_between(values, edges), linearize_priors(values, priors)
+    parts = [
+        _blocks(between.residuals, between.jac_i, between.jac_j, edges, position),
+        _blocks(unary.residuals, unary.jac_j, None, priors, position),
+    ]
+    rows, cols, blocks, nodes, pieces = (np.concatenate([p[k] for p in parts]) for k in range(5))
+    gradient = np.zeros((n, d))
+    np.add.at(gradient, nodes, pieces)
+    gradient = gradient.reshape(-1)
+    constant = parts[0][5] + parts[1][5]
+    hessian = _assembled(rows, cols, blocks, n)
+    if prior is not None:
+        at = (position[prior.nodes][:, None] * d + np.arange(d)).reshape(-1)
+        if isinstance(hessian, np.ndarray):
+            hessian[np.ix_(at, at)] += prior.hessian
+        else:
+            hessian = hessian + _embedded(prior.hessian, at, n * d)
+        gradient[at] += prior.gradient
+        constant += prior.constant
+    return Quadratic(hessian, gradient, float(constant))
+
+
+def _assembled(rows: np.ndarray, cols: np.ndarray, blocks: np.ndarray, n: int):
+    """The n·d square matrix of (d, d) ``blocks`` summed at block ``rows`` and ``cols``: dense
+    up to ``DENSE_SIZE`` unknowns, else sparse (CSR)."""
+    d = blocks.shape[-1]
+    if n * d <= DENSE_SIZE:
+        dense = np.zeros((n * n, d, d))
+        np.add.at(dense, rows * n + cols, blocks)
+        return dense.reshape(n, n, d, d).transpose(0, 2, 1, 3).reshape(n * d, n * d)
+    entry_rows = (rows[:, None, None] * d + np.arange(d)[:, None]).repeat(d, axis=2)
+    entry_cols = (cols[:, None, None] * d + np.arange(d)[None, :]).repeat(d, axis=1)
+    return scipy.sparse.coo_matrix(
+        (blocks.ravel(), (entry_rows.ravel(), entry_cols.ravel())), shape=(n * d, n * d)
+    ).tocsr()
+
+
+def _blocks(residuals, jac_i, jac_j, edges: EdgeSet, position: np.ndarray):
+    """(block rows, block columns, JₐᵀΩJ_b blocks, gradient nodes, −JₐᵀΩr pieces, ½ΣrᵀΩr) of
+    edges (between if ``jac_j`` is given, else unary on ``edges.i``), over free nodes only."""
+    information = edges.information
+    weighted = np.einsum("mij,mj->mi", information, residuals)
+    ends = [(edges.i, jac_i)] + ([] if jac_j is None else [(edges.j, jac_j)])
+    rows, cols, blocks, nodes, pieces = [], [], [], [], []
+    for a, jac_a in ends:
+        free_a = position[a] >= 0
+        nodes.append(position[a][free_a])
+        pieces.append(-np.einsum("mji,mj->mi", jac_a, weighted)[free_a])
+        for b, jac_b in ends:
+            free = free_a & (position[b] >= 0)
+            rows.append(position[a][free])
+            cols.append(position[b][free])
+            blocks.append(np.swapaxes(jac_a[free], 1, 2) @ information[free] @ jac_b[free])
+    d = residuals.shape[-1]
+    constant = 0.5 * float(np.einsum("mi,mi->", residuals, weighted))
+    return (
+        np.concatenate(rows),
+        np.concatenate(cols),
+        np.concatenate(blocks).reshape(-1, d, d),
+        np.concatenate(nodes),
+        np.concatenate(pieces).reshape(-1, d),
+        constant,
+    )
+
+
+def _embedded(matrix: np.ndarray, at: np.ndarray, size: int) -> scipy.sparse.csr_matrix:
+    """A dense square ``matrix`` placed at rows and columns ``at`` of a size × size matrix."""
+    rows = np.repeat(at, at.size)
+    cols = np.tile(at, at.size)
+    return scipy.sparse.coo_matrix((matrix.ravel(), (rows, cols)), shape=(size, size)).tocsr()
+
+
+def marginalized(
+    model: Quadratic, kept: np.ndarray, d: int
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """(H, g, c) of ``model`` minimised over the nodes not ``kept`` (a mask over its nodes), on
+    the kept ones: the Schur complement H_kk − H_km H_mm⁺ H_mk, g_k − H_km H_mm⁺ g_m and
+    c − ½ g_mᵀ H_mm⁺ g_m (pseudo-inverse: a direction that nothing measures stays unmeasured)."""
+    entries = np.repeat(kept, d)
+    dense = model.hessian
+    if not isinstance(dense, np.ndarray):
+        dense = dense.toarray()
+    h_kk = dense[np.ix_(entries, entries)]
+    h_km = dense[np.ix_(entries, ~entries)]
+    h_mm = dense[np.ix_(~entries, ~entries)]
+    g_k, g_m = model.gradient[entries], model.gradient[~entries]
+    inverse = np.linalg.pinv(h_mm, hermitian=True)
+    hessian = h_kk - h_km @ inverse @ h_km.T
+    return (
+        0.5 * (hessian + hessian.T),
+        g_k - h_km @ inverse @ g_m,
+        model.constant - 0.5 * float(g_m @ inverse @ g_m),
+    )
