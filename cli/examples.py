@@ -39,6 +39,10 @@ EXAMPLES = {
   posegraph scale-drift monocular.g2o -o corrected.txt --to kitti --convention camera_from_world
   posegraph generate false-loops place_recognition.g2o --from monocular.g2o --fraction 0.1
   posegraph scale-drift place_recognition.g2o -o corrected.g2o --robust gnc --json""",
+    "certify": """examples:
+  posegraph generate grid grid.g2o --size 3
+  posegraph certify grid.g2o
+  posegraph certify grid.g2o --init odometry --json""",
     "bench": """examples:
   posegraph datasets download tinyGrid3D smallGrid3D
   posegraph bench --graphs tinyGrid3D smallGrid3D --repeats 3

@@ -46,11 +46,17 @@ def main(argv: list[str] | None = None) -> int:
 
 def _run(argv: list[str] | None) -> int:
     from . import commands, data
+    from .certify import certify
     from .parser import parser
     from .scale_drift import scale_drift
 
     args = parser().parse_args(argv)
-    handlers = {"scale-drift": scale_drift, "generate": data.generate, "datasets": data.datasets}
+    handlers = {
+        "scale-drift": scale_drift,
+        "certify": certify,
+        "generate": data.generate,
+        "datasets": data.datasets,
+    }
     handler = handlers.get(args.command) or getattr(commands, args.command)
     return _handle(args, handler)
 

@@ -50,6 +50,7 @@ def parser() -> argparse.ArgumentParser:
         _plot,
         _eval,
         _scale_drift,
+        _certify,
         _bench,
         _generate,
         _datasets,
@@ -246,6 +247,18 @@ def _scale_drift(sub, groups: _Groups) -> None:
         help="pose convention of the TUM/KITTI output (default world_from_camera)",
     )
     drift.add_argument("--overwrite", action="store_true", help="allow -o to be the input file")
+
+
+def _certify(sub, groups: _Groups) -> None:
+    """``certify``."""
+    cert = _command(
+        sub,
+        "certify",
+        "optimise an SE2 or SE3 graph, then certify global optimality (SE-Sync's check and "
+        "Riemannian staircase; exit 1 when not certified)",
+        [groups.common, groups.reading, groups.solving],
+    )
+    cert.add_argument("input", help="g2o or TORO file (SE2 or SE3, without priors)")
 
 
 def _bench(sub, groups: _Groups) -> None:

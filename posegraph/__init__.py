@@ -4,6 +4,7 @@ from importlib.metadata import PackageNotFoundError, version
 
 from .analysis.marginals import marginals, relative_covariances
 from .api import optimize
+from .certify import Certificate, certify
 from .graph import PoseGraph
 from .graph.information import information_from_sigmas
 from .io import GraphFileError, ReadOptions, load_graph, read_graph, write_graph
@@ -20,6 +21,8 @@ except PackageNotFoundError:  # running from a source tree that is not installed
     __version__ = "0+unknown"
 
 __all__ = [
+    "Certificate",
+    "certify",
     "SE2",
     "SE3",
     "SO2",

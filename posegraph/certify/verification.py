@@ -1,0 +1,93 @@
+"""The certificate of a critical point Y of SE-Sync's rank-restricted problem (Rosen et al. 2019,
+Theorem 7 and §4.2): the Lagrange multipliers Λ = SymBlockDiag(Yᵀ Y Q) of the first-order
+conditions, and the smallest eigenvalue of S = Q − Λ. S ⪰ 0 certifies that YᵀY solves the
+semidefinite relaxation; where Y has rank d, its rounding is then the global optimum."""
+
+from __future__ import annotations
+
+import dataclasses
+import warnings
+
+import numpy as np
+import scipy.sparse.linalg
+
+from .data import SESyncData
+from .stiefel import blocks, sym_block_products
+
+EIGEN_TOLERANCE = 1e-5
+"""Relative residual at which LOBPCG stops."""
+EIGEN_ITERATIONS = 500
+"""Most LOBPCG iterations."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Spectrum:
+    """λ_min(S) with its eigenvector (dn,): the smallest of S's Rayleigh quotients on Y's rows
+    (its null space at a critical point) and of its smallest eigenvalue off them."""
+
+    smallest: float
+    vector: np.ndarray
+
+
+def multipliers(data: SESyncData, y: np.ndarray) -> np.ndarray:
+    """Λ's diagonal blocks (n, d, d): Sym(Yᵢᵀ (Y Q)ᵢ)."""
+    return sym_block_products(y, data.product(y), data.d)
+
+
+def certificate_matrix(data: SESyncData, y: np.ndarray) -> scipy.sparse.linalg.LinearOperator:
+    """S = Q − Λ as an operator on dn-vectors."""
+    lam, d, size = multipliers(data, y), data.d, data.d * data.n
+
+    def apply(x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x).reshape(-1)
+        qx = data.product(x[None, :])[0]
+        return qx - (lam @ x.reshape(-1, d, 1)).reshape(-1)
+
+    return scipy.sparse.linalg.LinearOperator((size, size), matvec=apply, dtype=float)
+
+
+def spectrum(data: SESyncData, y: np.ndarray, seed: int = 0) -> Spectrum:
+    """λ_min(S). At a critical point S Yᵀ = 0, so the rows of Y span eigenvectors of eigenvalue
+    0, and the rest of the spectrum is found by LOBPCG (Knyazev 2001) on their orthogonal
+    complement, preconditioned by ``SESyncData.precondition``, from seeded random vectors."""
+    s = certificate_matrix(data, y)
+    size = s.shape[0]
+    basis = np.linalg.qr(y.T)[0]
+    on_rows = np.linalg.eigh(basis.T @ (s @ basis))
+    preconditioner = scipy.sparse.linalg.LinearOperator(
+        (size, size),
+        matvec=lambda x: data.precondition(np.asarray(x).reshape(1, -1))[0],
+        matmat=lambda x: data.precondition(np.asarray(x).T).T,
+    )
+    start = np.random.default_rng(seed).normal(size=(size, 2))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # "not reaching the requested tolerance"
+        values, vectors = scipy.sparse.linalg.lobpcg(
+            s,
+            start,
+            M=preconditioner,
+            Y=basis,
+            largest=False,
+            tol=EIGEN_TOLERANCE,
+            maxiter=EIGEN_ITERATIONS,
+        )
+    if on_rows[0][0] < values[0]:
+        return Spectrum(float(on_rows[0][0]), basis @ on_rows[1][:, 0])
+    return Spectrum(float(values[0]), vectors[:, 0])
+
+
+def rounded(y: np.ndarray, d: int) -> np.ndarray:
+    """Rotations R (d × dn) from Y (r × dn): the rank-d part of Y's SVD, Σ_d V_dᵀ, reflected
+    if most of its blocks have negative determinant, each block then projected onto SO(d)
+    (SE-Sync Algorithm 2)."""
+    _, singular, vt = np.linalg.svd(y, full_matrices=False)
+    r_hat = singular[:d, None] * vt[:d]
+    parts = blocks(r_hat, d)
+    if np.count_nonzero(np.linalg.det(parts) > 0) < parts.shape[0] / 2:
+        r_hat[-1] *= -1.0
+        parts = blocks(r_hat, d)
+    u, _, wt = np.linalg.svd(parts)
+    signs = np.ones((parts.shape[0], d))
+    signs[:, -1] = np.sign(np.linalg.det(u @ wt))
+    rotations = (u * signs[:, None, :]) @ wt
+    return rotations.transpose(1, 0, 2).reshape(d, -1)
