@@ -17,13 +17,15 @@ EXIT_CERTIFIED = 0
 
 def certify(args: argparse.Namespace) -> int:
     """Exit 0 when the estimate is certified globally optimal for SE-Sync's problem, else 1."""
-    from posegraph.certify import certify as certified
+    from posegraph.certification import certify as certified
+    from posegraph.certification import require_certifiable
 
     inputs = Inputs(args)
     progress = Progress(talks(args), args.solver, args.max_iterations, cost_label(args))
     with progress:
         with progress.stage(f"reading {os.path.basename(args.input)}"):
             graph = inputs.graph(args.input).graph
+        require_certifiable(graph)  # before any work
         progress.begin("optimising")
         with progress.interruptible(), about(args.input):
             result = posegraph.Smoother(graph).optimize(callback=progress, **solving_options(args))
@@ -46,22 +48,53 @@ def certify(args: argparse.Namespace) -> int:
 
 
 def _text(source: str, error: float, certificate, after: float) -> str:
-    verdict = (
-        "certified globally optimal for SE-Sync's isotropic problem"
-        if certificate.certified
-        else f"not certified (the staircase stopped at rank {certificate.rank})"
-    )
-    climbed = " → ".join(
-        f"rank {s['rank']}: λ_min {s['smallest_eigenvalue']:.3g}" for s in certificate.steps
-    )
+    same = abs(after - error) <= 1e-6 * max(1.0, error)
     return "\n".join(
         [
-            f"{source}: {verdict}",
-            f"  SE-Sync objective  {certificate.objective:.10g} (lower bound {certificate.lower_bound:.10g})",
-            f"  λ_min(Q − Λ)       {certificate.smallest_eigenvalue:.3g} (tolerance −{certificate.tolerance:.3g})",
-            f"  checks             {climbed}",
+            f"{source}: {verdict(certificate)}",
+            *certificate_lines(certificate),
             f"  posegraph's error  {error:.10g}; from the certified estimate {after:.10g}"
-            f" ({'the same optimum' if abs(after - error) <= 1e-6 * max(1.0, error) else 'another point'})",
-            f"  time               {certificate.time:.2f} s",
+            f" ({'the same optimum' if same else 'another point'})",
         ]
     )
+
+
+def certified_if_asked(args: argparse.Namespace, graph: posegraph.PoseGraph, progress: Progress):
+    """``optimize --certify``: the certificate of the graph's solution, or None unasked."""
+    if not args.certify:
+        return None
+    with progress.stage("certifying (SE-Sync)"):
+        return posegraph.certify(graph)
+
+
+def with_certificate(record: dict, text: str, certificate) -> str:
+    """``optimize``'s record (in place) and text with the certificate, where there is one."""
+    if certificate is None:
+        return text
+    record["certificate"] = certificate.as_dict()
+    return "\n".join(
+        [text, f"certificate: {verdict(certificate)}", *certificate_lines(certificate)]
+    )
+
+
+def verdict(certificate) -> str:
+    """The certificate's verdict in words."""
+    if certificate.certified:
+        return "certified globally optimal for SE-Sync's isotropic problem"
+    return f"not certified (the staircase stopped at rank {certificate.rank})"
+
+
+def certificate_lines(certificate) -> list[str]:
+    """The summary's lines on a certificate: objective and bound, λ_min, the checks, time."""
+    checks = " → ".join(
+        f"rank {step['rank']}: {'passed' if step['certified'] else 'failed'}"
+        for step in certificate.steps
+    )
+    return [
+        f"  SE-Sync objective  {certificate.objective:.10g}"
+        f" (lower bound {certificate.lower_bound:.10g})",
+        f"  λ_min(Q − Λ)       {certificate.smallest_eigenvalue:.3g}"
+        f" (certified if ≥ −{certificate.tolerance:.3g})",
+        f"  checks             {checks}",
+        f"  certify time       {certificate.time:.2f} s",
+    ]

@@ -15,6 +15,7 @@ import numpy as np
 
 import posegraph
 from posegraph.analysis.doctor import diagnose
+from posegraph.certification import require_certifiable
 from posegraph.graph.information import information_from_sigmas
 from posegraph.io import ReadResult
 from posegraph.io.atomic import output_batch
@@ -33,6 +34,7 @@ from posegraph.solvers import Summary
 from posegraph.trajectory.evaluation import evaluate, paired_by_index
 from posegraph.trajectory.odometry import odometry_graph
 
+from .certify import certified_if_asked, with_certificate
 from .common import (
     Inputs,
     Kept,
@@ -75,6 +77,8 @@ def optimize(args: argparse.Namespace) -> int:
             except KeyError as error:
                 raise UsageError(f"--fix: {error.args[0]}") from None
         check_writable(args.input, graph, args.output, to=args.to)
+        if args.certify:
+            require_certifiable(graph)  # before any work
         before = graph.copy()
         smoother = posegraph.Smoother(graph)
         progress.begin("initialising")
@@ -88,6 +92,7 @@ def optimize(args: argparse.Namespace) -> int:
         if not summary.noise and summary.converged:
             with progress.stage("noise check"):
                 summary = _with_noise(graph, result, summary)
+        certificate = certified_if_asked(args, graph, progress)
         writing = args.output or args.plot or args.covariances
         with progress.stage("writing") if writing else contextlib.nullcontext():
             wrote = _write_optimised(args, read, smoother, before, kept)
@@ -109,6 +114,7 @@ def optimize(args: argparse.Namespace) -> int:
     text = format_summary(
         args.input, graph, summary, written, read.lifted_scale_information, record
     )
+    text = with_certificate(record, text, certificate)
     emit(args, record, text, inputs.warnings)
     return EXIT_OK if summary.converged else EXIT_NOT_CONVERGED
 

@@ -109,6 +109,12 @@ def _optimize(sub, groups: _Groups) -> None:
         " scaled information",
     )
     opt.add_argument(
+        "--certify",
+        action="store_true",
+        help="check the result's global optimality on SE-Sync's isotropic problem (SE2 and "
+        "SE3 graphs without priors; see 'posegraph certify')",
+    )
+    opt.add_argument(
         "--overwrite",
         action="store_true",
         help="allow -o or --covariances to be the input file",

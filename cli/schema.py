@@ -162,7 +162,32 @@ _READING = {
 weighting of SE3 and Sim3 rotation information (over φ as gtsam; over the quaternion's vector
 as g2o, ``--g2o-rotation-information``; null for SE2)."""
 
+CERTIFICATE = {
+    "type": "object",
+    "required": ["verdict", "objective", "smallest_eigenvalue", "tolerance", "certified",
+                 "lower_bound", "rank", "gradient_norm", "time", "steps"],
+    "properties": {
+        "verdict": {"enum": ["certified", "not certified"]},
+        "certified": {"type": "boolean"},
+        "rank": {"type": "integer"},
+        "steps": {"type": "array", "items": {"type": "object", "required": ["rank", "objective"]}},
+        **{key: _NUMBER for key in ("objective", "smallest_eigenvalue", "tolerance", "time")},
+    },
+}  # fmt: skip
+"""``posegraph.Certificate.as_dict``: SE-Sync's check of the estimate (``certify``)."""
+
 SCHEMAS = {
+    "certify": {
+        "type": "object",
+        "required": [
+            "command",
+            "input",
+            "posegraph_error",
+            "certificate",
+            "error_after_refining_certified",
+        ],
+        "properties": {"command": {"const": "certify"}, "certificate": CERTIFICATE},
+    },  # fmt: skip
     "scale-drift": {
         "type": "object",
         "required": [
@@ -224,6 +249,7 @@ SCHEMAS = {
             "lifted_scale_information": {"type": ["number", "null"]},
             **_READING,
             "summary": SUMMARY,
+            "certificate": CERTIFICATE,
         },
     },
     "info": {

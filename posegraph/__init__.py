@@ -4,7 +4,7 @@ from importlib.metadata import PackageNotFoundError, version
 
 from .analysis.marginals import marginals, relative_covariances
 from .api import optimize
-from .certify import Certificate, certify
+from .certification import Certificate, certify
 from .graph import PoseGraph
 from .graph.information import information_from_sigmas
 from .io import GraphFileError, ReadOptions, load_graph, read_graph, write_graph

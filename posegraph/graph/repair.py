@@ -27,11 +27,13 @@ def clipped(matrices: np.ndarray) -> np.ndarray:
 
 
 def _isotropic_precision(block: np.ndarray) -> np.ndarray:
-    """d / tr(B⁻¹) of (…, d, d) blocks, positive semi-definite first (``clipped``): the
+    """d / tr(B⁻¹) of (…, d, d) blocks, those not positive definite ``clipped`` first: the
     precision of the isotropic Gaussian nearest in information divergence, as SE-Sync takes τ
-    and κ; 0 for a block that weighs nothing."""
+    and κ (of a positive definite block exactly SE-Sync's value); 0 for a block that weighs
+    nothing."""
     size = block.shape[-1]
-    safe = clipped(block)
+    definite = np.linalg.eigvalsh(0.5 * (block + np.swapaxes(block, -1, -2)))[..., 0] > 0
+    safe = np.where(definite[..., None, None], block, clipped(block))
     positive = np.linalg.eigvalsh(safe)[..., 0] > 0
     precision = np.zeros(block.shape[:-2])
     precision[positive] = size / np.trace(np.linalg.inv(safe[positive]), axis1=-2, axis2=-1)

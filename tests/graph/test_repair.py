@@ -60,6 +60,16 @@ def test_an_indefinite_block_is_made_positive_before_its_precision():
     assert np.all(np.diag(repaired[0]) > 0)
 
 
+def test_a_positive_definite_block_keeps_se_syncs_precision_however_thin():
+    """cubicle.g2o's translation blocks: eigenvalues 10 and 1.7e7, positive definite; the
+    precision is SE-Sync's 3 / tr(B⁻¹), not that of a block clipped at the floor."""
+    information = np.diag([1.0, 1.0, 1.0, 4.0, 4.0, 4.0])
+    information[:3, :3] = [[2.46483e6, 5.35530e6, 0.0], [5.35530e6, 1.52034e7, 0.0], [0, 0, 10.0]]
+    repaired, _ = repair_information(information[None], SE3, "isotropic")
+    assert repaired[0, 0, 0] == pytest.approx(3 / np.trace(np.linalg.inv(information[:3, :3])))
+    assert repaired[0, 0, 0] == pytest.approx(29.9994, rel=1e-5)
+
+
 def test_an_unknown_repair_is_refused():
     with pytest.raises(ValueError, match="one of psd, isotropic, not 'clip'"):
         repair_information(INDEFINITE[None], SE3, "clip")

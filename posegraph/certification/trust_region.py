@@ -1,7 +1,10 @@
 """Riemannian trust-region minimisation of F(Y) = tr(Y Q Yᵀ) on St(d, r)ⁿ, with the
 Steihaug-Toint truncated conjugate gradient for each step (Absil, Baker and Gallivan 2007,
 Algorithms 1–2; SE-Sync §4.1.2). Gradient and Hessian are SE-Sync's eqs. 42–44:
-grad F = P_Y(2 Y Q) and Hess F[V] = P_Y(2 V Q − V SymBlockDiag(Yᵀ 2 Y Q))."""
+grad F = P_Y(2 Y Q) and Hess F[V] = P_Y(2 V Q − V SymBlockDiag(Yᵀ 2 Y Q)), preconditioned by
+(Q + εI)⁻¹ (SE-Sync's regularised Cholesky preconditioner). (Q − Λ + εI)⁻¹, the inverse of the
+Hessian's own matrix, was tried and is slower: near the minimum it is nearly singular along the
+global rotation, a direction of zero curvature that CG then chases."""
 
 from __future__ import annotations
 

@@ -10,7 +10,7 @@ from posegraph_datasets.generators import grid, manhattan_world, visual_odometry
 from posegraph_datasets.paths import benchmark_graph
 
 import posegraph
-from posegraph.certify.data import precisions, sesync_data
+from posegraph.certification.data import precisions, sesync_data
 from posegraph.lie import SE2, SE3
 
 
@@ -86,9 +86,9 @@ def test_torus3d_from_the_files_values_is_not_certified_until_the_staircase_clim
     if path is None:
         pytest.skip("torus3D.g2o is not in ../shared/datasets or POSEGRAPH_DATASETS")
     graph = posegraph.read_graph(path).graph
-    assert posegraph.optimize(graph, init="file").summary.final_error == pytest.approx(
-        29950.47, rel=1e-5
-    )  # Levenberg-Marquardt's local minimum
+    options = posegraph.SolverOptions(max_iterations=40)  # 100 creep on to 29950.47
+    error = posegraph.optimize(graph, init="file", options=options).summary.final_error
+    assert 29950 < error < 30000  # Levenberg-Marquardt's basin from the file; the optimum: 12117.6
     certificate = posegraph.certify(graph)
     first, last = certificate.steps[0], certificate.steps[-1]
     assert first["rank"] == 3 and first["smallest_eigenvalue"] < -certificate.tolerance

@@ -18,7 +18,7 @@ import scipy.sparse
 
 from ..graph import PoseGraph
 from ..lie import SE2, SE3
-from ..problem.cholesky import make_cholesky
+from ..problem.cholesky import NotPositiveDefinite, make_cholesky
 
 
 def precisions(group: type, information: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -50,14 +50,37 @@ class SESyncData:
     laplacian_factor: object
     """The Cholesky factor of Ā Ω Āᵀ, Ω = diag(τ)."""
     preconditioner: object
-    """The Cholesky factor of L(G̃ρ) + T Ω Tᵀ + εI, a sparse matrix above Q (Q is it less a
-    positive semidefinite term; T Ω Tᵀ is block diagonal), whose inverse preconditions."""
+    """The Cholesky factor of ``joint`` + εI on the rotations (ε: 1e-6 of the largest diagonal
+    entry, as Q can be singular along the global rotation): it applies (Q + εI)⁻¹, SE-Sync's
+    regularised Cholesky preconditioner."""
     scale: float
     """The largest diagonal entry of L(G̃ρ) + T Ω Tᵀ: the size of Q's entries."""
+    joint: scipy.sparse.csc_matrix
+    """The sparse matrix of the cost in the reduced translations and the rotations,
+    [[Ā Ω Āᵀ, Ā Ω Tᵀ], [T Ω Āᵀ, L(G̃ρ) + T Ω Tᵀ]], of which Q is the Schur complement."""
 
     def precondition(self, y: np.ndarray) -> np.ndarray:
-        """Y M⁻¹ for Y of shape (k, dn), M the ``preconditioner``'s matrix."""
-        return self.preconditioner.solve(np.ascontiguousarray(y.T)).T
+        """Y (Q + εI)⁻¹ for Y of shape (k, dn): the rotation block of the solution of the
+        regularised ``joint`` system with zero translation load, Q + εI being its Schur
+        complement on the rotations."""
+        load = np.zeros((self.n - 1 + y.shape[1], y.shape[0]))
+        load[self.n - 1 :] = y.T
+        return self.preconditioner.solve(load)[self.n - 1 :].T
+
+    def factor_less(self, blocks: np.ndarray, shift: float):
+        """The Cholesky factor of ``joint`` less the block-diagonal B (``blocks``, (n, d, d))
+        plus δI (δ = ``shift``) on the rotations, whose Schur complement on them is
+        Q − B + δI; None where that matrix is not positive definite."""
+        d, n = self.d, self.n
+        entries = n - 1 + np.arange(d * n).reshape(n, d)
+        rows = np.broadcast_to(entries[:, :, None], (n, d, d)).ravel()
+        cols = np.broadcast_to(entries[:, None, :], (n, d, d)).ravel()
+        change = (shift * np.eye(d) - blocks).ravel()
+        correction = scipy.sparse.coo_matrix((change, (rows, cols)), shape=self.joint.shape)
+        try:
+            return _factorized(self.joint + correction)
+        except NotPositiveDefinite:
+            return None
 
     def product(self, y: np.ndarray) -> np.ndarray:
         """Y Q for Y of shape (k, dn)."""
@@ -78,16 +101,22 @@ class SESyncData:
         return np.vstack([np.zeros((1, self.d)), rest])
 
 
+def require_certifiable(graph: PoseGraph) -> None:
+    """Refuse, naming why, a graph that SE-Sync's problem cannot hold: not SE2 or SE3, with
+    priors, or not connected."""
+    if graph.group not in (SE2, SE3):
+        raise ValueError(f"certification is for SE2 and SE3 graphs, not {graph.group.__name__}")
+    if len(graph.priors):
+        raise ValueError("SE-Sync's problem has no priors: certify a graph without them")
+    if graph.num_nodes < 2 or graph.components().max() > 0:
+        raise ValueError("certification needs a connected graph of two poses or more")
+
+
 def sesync_data(graph: PoseGraph) -> SESyncData:
     """SE-Sync's problem of an SE2 or SE3 graph without priors, its edges' information reduced
     to κ and τ (``precisions``). The graph must be connected."""
+    require_certifiable(graph)
     group = graph.group
-    if group not in (SE2, SE3):
-        raise ValueError(f"certification is for SE2 and SE3 graphs, not {group.__name__}")
-    if len(graph.priors):
-        raise ValueError("SE-Sync's problem has no priors: certify a graph without them")
-    if graph.num_nodes and graph.components().max() > 0:
-        raise ValueError("certification needs a connected graph")
     d, n, edges = (2 if group is SE2 else 3), graph.num_nodes, graph.edges
     m = len(edges)
     kappa, tau = precisions(group, edges.information)
@@ -95,25 +124,7 @@ def sesync_data(graph: PoseGraph) -> SESyncData:
     rotation, translation = measured[:, :d, :d], measured[:, :d, d]
     i, j = edges.i, edges.j
     block = np.arange(d)
-    eye = np.broadcast_to(np.eye(d), (m, d, d)) * kappa[:, None, None]
-    rows = [i[:, None, None] * d + block[:, None], j[:, None, None] * d + block[:, None]]
-    cols = [i[:, None, None] * d + block[None, :], j[:, None, None] * d + block[None, :]]
-    entries = [
-        (rows[0], cols[0], eye),
-        (rows[1], cols[1], eye),
-        (rows[0], cols[1], -kappa[:, None, None] * rotation),
-        (rows[1], cols[0], -kappa[:, None, None] * np.swapaxes(rotation, 1, 2)),
-    ]
-    laplacian = scipy.sparse.coo_matrix(
-        (
-            np.concatenate([np.broadcast_to(v, (m, d, d)).ravel() for _, _, v in entries]),
-            (
-                np.concatenate([np.broadcast_to(r, (m, d, d)).ravel() for r, _, _ in entries]),
-                np.concatenate([np.broadcast_to(c, (m, d, d)).ravel() for _, c, _ in entries]),
-            ),
-        ),
-        shape=(d * n, d * n),
-    ).tocsr()
+    laplacian = _connection_laplacian(i, j, kappa, rotation, n)
     translations = scipy.sparse.coo_matrix(
         (-translation.ravel(), ((i[:, None] * d + block).ravel(), np.repeat(np.arange(m), d))),
         shape=(d * n, m),
@@ -123,7 +134,11 @@ def sesync_data(graph: PoseGraph) -> SESyncData:
         shape=(n, m),
     ).tocsr()[1:]
     reduced = incidence @ scipy.sparse.diags(tau) @ incidence.T
-    bound = _upper_bound(laplacian, translations, tau)
+    rotational = laplacian + translations @ scipy.sparse.diags(tau) @ translations.T
+    coupling = incidence @ scipy.sparse.diags(tau) @ translations.T
+    joint = scipy.sparse.bmat([[reduced, coupling], [coupling.T, rotational]]).tocsc()
+    scale = float(rotational.diagonal().max())
+    regularised = joint + scipy.sparse.diags(np.r_[np.zeros(n - 1), np.full(d * n, 1e-6 * scale)])
     return SESyncData(
         d,
         n,
@@ -132,16 +147,39 @@ def sesync_data(graph: PoseGraph) -> SESyncData:
         incidence,
         tau,
         _factorized(reduced),
-        _factorized(bound),
-        float(bound.diagonal().max()),
+        _factorized(regularised),
+        scale,
+        joint,
     )
 
 
-def _upper_bound(laplacian, translations, tau: np.ndarray) -> scipy.sparse.csc_matrix:
-    """L(G̃ρ) + T Ω Tᵀ, regularised by 1e-6 of its largest diagonal entry (L(G̃ρ) is singular
-    along the global rotation)."""
-    bound = (laplacian + translations @ scipy.sparse.diags(tau) @ translations.T).tocsc()
-    return bound + scipy.sparse.identity(bound.shape[0]) * 1e-6 * bound.diagonal().max()
+def _connection_laplacian(i, j, kappa: np.ndarray, rotation: np.ndarray, n: int):
+    """L(G̃ρ), dn × dn: κ I on the diagonal blocks of both ends of each edge, −κ R̃ at (i, j)
+    and −κ R̃ᵀ at (j, i) (SE-Sync eq. 13)."""
+    m, d = rotation.shape[0], rotation.shape[-1]
+    block = np.arange(d)
+    at_i, at_j = i[:, None, None] * d, j[:, None, None] * d
+    rows = [
+        at_i + block[:, None],
+        at_j + block[:, None],
+        at_i + block[:, None],
+        at_j + block[:, None],
+    ]
+    cols = [at_i + block, at_j + block, at_j + block, at_i + block]
+    weight = kappa[:, None, None]
+    values = [weight * np.eye(d), weight * np.eye(d), -weight * rotation,
+              -weight * np.swapaxes(rotation, 1, 2)]  # fmt: skip
+    shape = (m, d, d)
+    return scipy.sparse.coo_matrix(
+        (
+            np.concatenate([np.broadcast_to(v, shape).ravel() for v in values]),
+            (
+                np.concatenate([np.broadcast_to(r, shape).ravel() for r in rows]),
+                np.concatenate([np.broadcast_to(c, shape).ravel() for c in cols]),
+            ),
+        ),
+        shape=(d * n, d * n),
+    ).tocsr()
 
 
 def _factorized(matrix) -> object:

@@ -12,13 +12,14 @@ from ..graph import PoseGraph
 from ..lie import LieGroup
 from .data import SESyncData, sesync_data
 from .stiefel import lifted, retract
-from .trust_region import minimize
-from .verification import Spectrum, rounded, spectrum
+from .trust_region import Minimum, minimize
+from .verification import Spectrum, check, rounded
 
 RELATIVE_TOLERANCE = 1e-6
 """δ = this × the largest diagonal entry of L(G̃ρ) + T Ω Tᵀ: λ_min(S) ≥ −δ certifies."""
-GRADIENT_TOLERANCE = 1e-6
-"""The trust region stops where ‖grad F‖ ≤ this × max(1, F)."""
+GRADIENT_TOLERANCE = 1e-2
+"""The trust region stops where ‖grad F‖ ≤ this × δ: well inside the check's tolerance (at a
+point short of critical, S Yᵀ is of the order of the gradient)."""
 MAX_RANK = 10
 """The staircase's highest rank before it gives up (SE-Sync's default)."""
 
@@ -28,8 +29,9 @@ class Certificate:
     """The verdict on SE-Sync's problem of a graph (``data.sesync_data``: each edge's isotropic
     precisions): the estimate the check ran on (values, one per node, pose 0's translation at
     the origin), F there, λ_min(S) and the tolerance δ, whether λ_min ≥ −δ (certified globally
-    optimal for that problem), the relaxation's lower bound tr(Λ) + dn·min(λ_min, 0) on F, the
-    staircase's highest rank, and seconds."""
+    optimal for that problem), the relaxation's lower bound tr(Λ) + dn·min(λ_min, −δ) on F
+    (Λ + min(λ_min, −δ) I is feasible for the dual), the staircase's highest rank, and
+    seconds. Where certified, λ_min(S) lies between −δ and ``smallest_eigenvalue``."""
 
     values: LieGroup
     objective: float
@@ -66,30 +68,31 @@ def certify(
     tolerance = RELATIVE_TOLERANCE * data.scale
     steps = []
 
-    def checked(start: np.ndarray):
-        found = minimize(data, start, GRADIENT_TOLERANCE * max(1.0, data.objective(start)))
-        check = spectrum(data, found.y)
+    def checked(start: np.ndarray) -> tuple[Minimum, Spectrum]:
+        found = minimize(data, start, GRADIENT_TOLERANCE * tolerance)
+        result = check(data, found.y, tolerance)
         steps.append(
             {
                 "rank": found.y.shape[0],
                 "objective": found.objective,
-                "smallest_eigenvalue": check.smallest,
+                "smallest_eigenvalue": result.smallest,
+                "certified": result.certified,
             }
         )
-        return found, check
+        return found, result
 
-    found, check = checked(y)
-    while check.smallest < -tolerance and found.y.shape[0] < max_rank:
-        found, check = checked(_escape(data, found.y, check))
+    found, result = checked(y)
+    while not result.certified and found.y.shape[0] < max_rank:
+        found, result = checked(_escape(data, found.y, result))
     if found.y.shape[0] > d:
-        found, check = checked(rounded(found.y, d))
-    bound = found.objective + data.d * data.n * min(check.smallest, 0.0)
+        found, result = checked(rounded(found.y, d))
+    bound = found.objective + data.d * data.n * min(result.smallest, -tolerance)
     return Certificate(
         _poses(graph, data, found.y),
         found.objective,
-        check.smallest,
+        result.smallest,
         tolerance,
-        bool(check.smallest >= -tolerance),
+        result.certified,
         bound,
         max(step["rank"] for step in steps),
         found.gradient_norm,

@@ -22,11 +22,14 @@ EIGEN_ITERATIONS = 500
 
 @dataclasses.dataclass(frozen=True)
 class Spectrum:
-    """λ_min(S) with its eigenvector (dn,): the smallest of S's Rayleigh quotients on Y's rows
-    (its null space at a critical point) and of its smallest eigenvalue off them."""
+    """The check of S = Q − Λ against a tolerance δ: whether S + δI ≻ 0, and λ_min(S) with its
+    eigenvector (dn,) where that fails. Where it holds, ``smallest`` is S's smallest Rayleigh
+    quotient on Y's rows (its null space at a critical point), which λ_min(S) lies between −δ
+    and, and ``vector`` is None."""
 
+    certified: bool
     smallest: float
-    vector: np.ndarray
+    vector: np.ndarray | None
 
 
 def multipliers(data: SESyncData, y: np.ndarray) -> np.ndarray:
@@ -46,10 +49,25 @@ def certificate_matrix(data: SESyncData, y: np.ndarray) -> scipy.sparse.linalg.L
     return scipy.sparse.linalg.LinearOperator((size, size), matvec=apply, dtype=float)
 
 
-def spectrum(data: SESyncData, y: np.ndarray, seed: int = 0) -> Spectrum:
-    """λ_min(S). At a critical point S Yᵀ = 0, so the rows of Y span eigenvectors of eigenvalue
-    0, and the rest of the spectrum is found by LOBPCG (Knyazev 2001) on their orthogonal
-    complement, preconditioned by ``SESyncData.precondition``, from seeded random vectors."""
+def check(data: SESyncData, y: np.ndarray, tolerance: float) -> Spectrum:
+    """Whether S + δI ≻ 0 (δ = ``tolerance``): S is the Schur complement of the sparse matrix
+    ``SESyncData.joint`` with Λ subtracted from its rotation block onto that block, so a sparse
+    Cholesky factorisation of that matrix plus δI on the rotations succeeds exactly when it
+    holds (Rosen et al. 2019, §4.2, and the Schur complement lemma). Where it fails, λ_min(S)
+    and its eigenvector come from ``smallest_eigenpair``."""
+    s = certificate_matrix(data, y)
+    basis = np.linalg.qr(y.T)[0]
+    on_rows = float(np.linalg.eigvalsh(basis.T @ (s @ basis))[0])
+    if data.factor_less(multipliers(data, y), tolerance) is None:
+        return smallest_eigenpair(data, y)
+    return Spectrum(True, on_rows, None)
+
+
+def smallest_eigenpair(data: SESyncData, y: np.ndarray, seed: int = 0) -> Spectrum:
+    """λ_min(S) and its eigenvector (a failed check). At a critical point S Yᵀ = 0, so the rows
+    of Y span eigenvectors of eigenvalue 0, and the rest of the spectrum is found by LOBPCG
+    (Knyazev 2001) on their orthogonal complement, preconditioned by
+    ``SESyncData.precondition``, from seeded random vectors."""
     s = certificate_matrix(data, y)
     size = s.shape[0]
     basis = np.linalg.qr(y.T)[0]
@@ -72,8 +90,8 @@ def spectrum(data: SESyncData, y: np.ndarray, seed: int = 0) -> Spectrum:
             maxiter=EIGEN_ITERATIONS,
         )
     if on_rows[0][0] < values[0]:
-        return Spectrum(float(on_rows[0][0]), basis @ on_rows[1][:, 0])
-    return Spectrum(float(values[0]), vectors[:, 0])
+        return Spectrum(False, float(on_rows[0][0]), basis @ on_rows[1][:, 0])
+    return Spectrum(False, float(values[0]), vectors[:, 0])
 
 
 def rounded(y: np.ndarray, d: int) -> np.ndarray:

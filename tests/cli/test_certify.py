@@ -1,0 +1,50 @@
+"""``posegraph certify`` and ``optimize --certify``: the verdict, the JSON record (schema), and
+a graph the check cannot take refused in one line."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from posegraph_datasets.generators import grid
+
+from posegraph.io import write_graph
+from tests.cli.helpers import run, run_json
+
+
+@pytest.fixture
+def grid_file(tmp_path) -> str:
+    graph, _ = grid(size=3, seed=5)
+    path = tmp_path / "grid.g2o"
+    write_graph(graph, str(path))
+    return str(path)
+
+
+def test_certify_reports_the_verdict_and_posegraphs_own_optimum(grid_file):
+    document = run_json("certify", grid_file)
+    certificate = document["certificate"]
+    assert certificate["verdict"] == "certified" and certificate["rank"] == 3
+    assert certificate["smallest_eigenvalue"] >= -certificate["tolerance"]
+    assert certificate["lower_bound"] <= certificate["objective"]
+    # Levenberg-Marquardt from the certified estimate ends where posegraph's own run did.
+    assert document["error_after_refining_certified"] == pytest.approx(
+        document["posegraph_error"], rel=1e-8
+    )
+    text = run("certify", grid_file).stdout
+    assert "certified globally optimal for SE-Sync's isotropic problem" in text
+
+
+def test_optimize_certify_adds_the_certificate(grid_file, tmp_path):
+    document = run_json("optimize", grid_file, "--certify")
+    assert document["certificate"]["certified"]
+    assert "certificate" not in run_json("optimize", grid_file)
+
+
+def test_a_graph_with_priors_is_refused_in_one_line(tmp_path):
+    graph, _ = grid(size=2, seed=6)
+    graph.add_prior(0, graph.values[0], np.eye(6))
+    path = tmp_path / "prior.g2o"
+    write_graph(graph, str(path))
+    completed = run("certify", path, check_exit=2)
+    assert completed.stderr.strip().splitlines() == [
+        "posegraph: error: SE-Sync's problem has no priors: certify a graph without them"
+    ]
