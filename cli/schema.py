@@ -179,15 +179,9 @@ CERTIFICATE = {
 SCHEMAS = {
     "certify": {
         "type": "object",
-        "required": [
-            "command",
-            "input",
-            "posegraph_error",
-            "certificate",
-            "error_after_refining_certified",
-        ],
+        "required": ["command", "input", "posegraph_error", "certificate"],
         "properties": {"command": {"const": "certify"}, "certificate": CERTIFICATE},
-    },  # fmt: skip
+    },
     "scale-drift": {
         "type": "object",
         "required": [
