@@ -67,6 +67,24 @@ def certified_if_asked(args: argparse.Namespace, graph: posegraph.PoseGraph, pro
         return posegraph.certify(graph)
 
 
+def info_certificate(args: argparse.Namespace, graph: posegraph.PoseGraph, record: dict, text: str):
+    """``info --certify``: optimise a copy of the graph (defaults) and certify it, adding the
+    certificate to the record and text; a graph the check cannot take gets a line saying why
+    (``info`` refuses nothing it could read)."""
+    from posegraph.certification import require_certifiable
+
+    if not args.certify:
+        return text
+    try:
+        require_certifiable(graph)
+    except ValueError as reason:
+        record["certificate"] = None
+        return f"{text}\ncertificate: not checked: {reason}"
+    solved = graph.copy()
+    posegraph.optimize(solved)
+    return with_certificate(record, text, posegraph.certify(solved))
+
+
 def with_certificate(record: dict, text: str, certificate) -> str:
     """``optimize``'s record (in place) and text with the certificate, where there is one."""
     if certificate is None:

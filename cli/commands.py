@@ -34,7 +34,7 @@ from posegraph.solvers import Summary
 from posegraph.trajectory.evaluation import evaluate, paired_by_index
 from posegraph.trajectory.odometry import odometry_graph
 
-from .certify import certified_if_asked, with_certificate
+from .certify import certified_if_asked, info_certificate, with_certificate
 from .common import (
     Inputs,
     Kept,
@@ -201,7 +201,8 @@ def info(args: argparse.Namespace) -> int:
         **reading,
         "skipped_lines": inputs.skipped_lines,
     }
-    emit(args, record, format_diagnosis(diagnosis, reading))
+    text = info_certificate(args, read.graph, record, format_diagnosis(diagnosis, reading))
+    emit(args, record, text)
     return EXIT_OK
 
 

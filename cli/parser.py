@@ -130,6 +130,11 @@ def _info(sub, groups: _Groups) -> None:
         [groups.common, groups.reading],
     )
     info.add_argument("input")
+    info.add_argument(
+        "--certify",
+        action="store_true",
+        help="also optimise a copy and check its global optimality (see 'posegraph certify')",
+    )
 
 
 def _convert(sub, groups: _Groups) -> None:

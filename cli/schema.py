@@ -272,6 +272,7 @@ SCHEMAS = {
             "skipped_lines",
         ],
         "properties": {
+            "certificate": {"anyOf": [CERTIFICATE, {"type": "null"}]},
             "command": {"const": "info"},
             "noise": NOISE,
             "skipped_lines": _SKIPPED_LINES,

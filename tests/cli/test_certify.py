@@ -48,3 +48,16 @@ def test_a_graph_with_priors_is_refused_in_one_line(tmp_path):
     assert completed.stderr.strip().splitlines() == [
         "posegraph: error: SE-Sync's problem has no priors: certify a graph without them"
     ]
+
+
+def test_info_certify_checks_what_it_can_and_says_why_not(grid_file, tmp_path):
+    document = run_json("info", grid_file, "--certify")
+    assert document["certificate"]["certified"]
+    graph, _ = grid(size=2, seed=7)
+    graph.add_prior(0, graph.values[0], np.eye(6))
+    path = tmp_path / "prior.g2o"
+    write_graph(graph, str(path))
+    assert run_json("info", path, "--certify")["certificate"] is None
+    assert "certificate: not checked: SE-Sync's problem has no priors" in run(
+        "info", path, "--certify"
+    ).stdout
