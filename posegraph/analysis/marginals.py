@@ -128,6 +128,11 @@ def _group_covariances(
     as ``marginals`` describes them."""
     smoother = source if isinstance(source, Smoother) else None
     graph = source if smoother is None else smoother.graph
+    if smoother is not None and smoother.fixed_lag is not None:
+        raise ValueError(
+            "covariances of a fixed-lag Smoother's window (its marginal prior with the "
+            "measurements since) are not available; pass its graph for the full graph's"
+        )
     if smoother is not None:
         edge_weights, prior_weights = smoother.weights()
         if np.any(edge_weights != 1.0) or np.any(prior_weights != 1.0):

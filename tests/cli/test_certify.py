@@ -58,6 +58,7 @@ def test_info_certify_checks_what_it_can_and_says_why_not(grid_file, tmp_path):
     path = tmp_path / "prior.g2o"
     write_graph(graph, str(path))
     assert run_json("info", path, "--certify")["certificate"] is None
-    assert "certificate: not checked: SE-Sync's problem has no priors" in run(
-        "info", path, "--certify"
-    ).stdout
+    assert (
+        "certificate: not checked: SE-Sync's problem has no priors"
+        in run("info", path, "--certify").stdout
+    )

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from posegraph_datasets.generators import visual_odometry
 
+import posegraph
 from posegraph import PoseGraph, Smoother, SolverOptions, optimize
 from posegraph.lie import SE2, SE3
 from posegraph.smoother.marginal import marginalized, quadratic
@@ -123,6 +124,8 @@ def test_what_a_fixed_lag_smoother_refuses():
         Smoother(graph, lag=0)
     with pytest.raises(ValueError, match="in poses .* or in seconds, not both"):
         Smoother(graph, lag=3, lag_seconds=1.0)
+    with pytest.raises(ValueError, match="covariances of a fixed-lag Smoother's window"):
+        posegraph.marginals(smoother, [1])
     with pytest.raises(ValueError, match="timestamps belong to a Smoother made with lag_seconds"):
         _ = smoother.timestamps
 
