@@ -7,8 +7,21 @@ import argparse
 import os
 
 import posegraph
+from posegraph.io.atomic import output_batch
+from posegraph.io.conversion import convert as convert_graph
+from posegraph.io.conversion import output_format
 
-from .common import Inputs, about, cost_label, emit, solving_options, talks
+from .common import (
+    Inputs,
+    about,
+    check_output,
+    check_paths,
+    check_writable,
+    cost_label,
+    emit,
+    solving_options,
+    talks,
+)
 from .errors import EXIT_NOT_CONVERGED
 from .progress import Progress
 
@@ -20,12 +33,15 @@ def certify(args: argparse.Namespace) -> int:
     from posegraph.certification import certify as certified
     from posegraph.certification import require_certifiable
 
+    check_paths([args.input], {"-o": args.output}, args.overwrite)
+    check_output(args.output, args.to)
     inputs = Inputs(args)
     progress = Progress(talks(args), args.solver, args.max_iterations, cost_label(args))
     with progress:
         with progress.stage(f"reading {os.path.basename(args.input)}"):
             graph = inputs.graph(args.input).graph
         require_certifiable(graph)  # before any work
+        check_writable(args.input, graph, args.output, to=args.to)
         progress.begin("optimising")
         with progress.interruptible(), about(args.input):
             result = posegraph.Smoother(graph).optimize(callback=progress, **solving_options(args))
@@ -36,14 +52,24 @@ def certify(args: argparse.Namespace) -> int:
             refined = graph.copy()
             refined.set_values(certificate.values)
             after = posegraph.optimize(refined, init="file").summary.final_error
+        if args.output:
+            with progress.stage("writing"), output_batch():
+                convert_graph(
+                    refined,
+                    args.output,
+                    output_format(args.output, args.to),
+                    g2o_rotation_information=args.g2o_rotation_information,
+                )
     record = {
         "command": "certify",
         "input": args.input,
+        "output": args.output,
         "posegraph_error": result.summary.final_error,
         "certificate": certificate.as_dict(),
         "error_after_refining_certified": after,
     }
-    emit(args, record, _text(args.input, result.summary.final_error, certificate, after))
+    text = _text(args.input, result.summary.final_error, certificate, after)
+    emit(args, record, text + (f"\nwrote {args.output}" if args.output else ""), inputs.warnings)
     return EXIT_CERTIFIED if certificate.certified else EXIT_NOT_CONVERGED
 
 

@@ -270,6 +270,13 @@ def _certify(sub, groups: _Groups) -> None:
         [groups.common, groups.reading, groups.solving],
     )
     cert.add_argument("input", help="g2o or TORO file (SE2 or SE3, without priors)")
+    cert.add_argument(
+        "-o",
+        "--output",
+        help="write the certified estimate, refined by posegraph's Levenberg-Marquardt, here",
+    )
+    options.output_format(cert)
+    cert.add_argument("--overwrite", action="store_true", help="allow -o to be the input file")
 
 
 def _bench(sub, groups: _Groups) -> None:

@@ -180,7 +180,11 @@ SCHEMAS = {
     "certify": {
         "type": "object",
         "required": ["command", "input", "posegraph_error", "certificate"],
-        "properties": {"command": {"const": "certify"}, "certificate": CERTIFICATE},
+        "properties": {
+            "command": {"const": "certify"},
+            "output": _PATH_OR_NULL,
+            "certificate": CERTIFICATE,
+        },  # fmt: skip
     },
     "scale-drift": {
         "type": "object",

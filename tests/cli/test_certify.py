@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 from posegraph_datasets.generators import grid
 
-from posegraph.io import write_graph
+import posegraph
+from posegraph.io import read_graph, write_graph
 from tests.cli.helpers import run, run_json
 
 
@@ -62,3 +63,17 @@ def test_info_certify_checks_what_it_can_and_says_why_not(grid_file, tmp_path):
         "certificate: not checked: SE-Sync's problem has no priors"
         in run("info", path, "--certify").stdout
     )
+
+
+def test_certify_writes_the_certified_estimate_and_refuses_to_overwrite_its_input(
+    grid_file, tmp_path
+):
+    output = tmp_path / "certified.g2o"
+    document = run_json("certify", grid_file, "-o", output)
+    assert document["output"] == str(output)
+    written = read_graph(str(output)).graph
+    optimised = read_graph(grid_file).graph
+    posegraph.optimize(optimised)
+    assert np.abs(written.values.as_matrix() - optimised.values.as_matrix()).max() < 1e-5
+    refused = run("certify", grid_file, "-o", grid_file, check_exit=2)
+    assert "refusing to overwrite an input file with -o" in refused.stderr
