@@ -103,13 +103,29 @@ class SESyncData:
 
 def require_certifiable(graph: PoseGraph) -> None:
     """Refuse, naming why, a graph that SE-Sync's problem cannot hold: not SE2 or SE3, with
-    priors, or not connected."""
+    priors, not connected, or with a translation or rotation information block that is not
+    positive definite (its isotropic precision would be 0 or undefined)."""
     if graph.group not in (SE2, SE3):
         raise ValueError(f"certification is for SE2 and SE3 graphs, not {graph.group.__name__}")
     if len(graph.priors):
         raise ValueError("SE-Sync's problem has no priors: certify a graph without them")
     if graph.num_nodes < 2 or graph.components().max() > 0:
         raise ValueError("certification needs a connected graph of two poses or more")
+    d = 2 if graph.group is SE2 else 3
+    information = graph.edges.information
+    for name, block in (
+        ("translation", information[:, :d, :d]),
+        ("rotation", information[:, d:, d:]),
+    ):
+        definite = np.linalg.eigvalsh(0.5 * (block + np.swapaxes(block, 1, 2)))[:, 0] > 0
+        if not definite.all():
+            e = int(np.flatnonzero(~definite)[0])
+            ids = graph.node_ids[[graph.edges.i[e], graph.edges.j[e]]]
+            raise ValueError(
+                f"edge {ids[0]} → {ids[1]}: its {name} information is not positive definite "
+                "(SE-Sync's isotropic model needs a precision in every direction; "
+                "--repair-information isotropic makes one)"
+            )
 
 
 def sesync_data(graph: PoseGraph) -> SESyncData:

@@ -4,6 +4,8 @@ torus3D's bad local minimum, from which the staircase reaches the certified opti
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from posegraph_datasets.generators import grid, manhattan_world, visual_odometry
@@ -95,3 +97,13 @@ def test_torus3d_from_the_files_values_is_not_certified_until_the_staircase_clim
     assert certificate.rank > 3 and certificate.certified
     assert last["rank"] == 3
     assert f"{certificate.objective:.4g}" == "2.423e+04"  # SE-Sync's published optimum
+
+
+def test_a_block_without_information_in_some_direction_is_refused_by_name():
+    graph, _ = grid(size=2, seed=8)
+    information = graph.edges.information.copy()
+    information[3, 0, :] = information[3, :, 0] = 0.0  # x of edge 3 is not measured
+    graph.edges = dataclasses.replace(graph.edges, information=information)
+    i, j = graph.node_ids[graph.edges.i[3]], graph.node_ids[graph.edges.j[3]]
+    with pytest.raises(ValueError, match=f"edge {i} → {j}: its translation information is not"):
+        posegraph.certify(graph)
