@@ -43,12 +43,14 @@ class Certificate:
     gradient_norm: float
     time: float
     steps: tuple[dict, ...] = ()
-    """Each check on the way: the rank, F at the critical point found, λ_min(S) there."""
+    """Each check on the way: the rank, F at the critical point found, λ_min(S) there (as
+    ``Certificate.smallest_eigenvalue``) and whether it passed."""
 
     def as_dict(self) -> dict:
         """A JSON-ready dictionary (without the values)."""
-        fields = dataclasses.asdict(self)
+        fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
         del fields["values"]
+        fields["steps"] = [dict(step) for step in self.steps]
         return {"verdict": "certified" if self.certified else "not certified", **fields}
 
 
