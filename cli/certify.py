@@ -7,6 +7,7 @@ import argparse
 import os
 
 import posegraph
+from posegraph.certification import require_certifiable
 from posegraph.io.atomic import output_batch
 from posegraph.io.conversion import convert as convert_graph
 from posegraph.io.conversion import output_format
@@ -19,37 +20,37 @@ from .common import (
     check_writable,
     cost_label,
     emit,
+    set_aside_rejected,
     solving_options,
     talks,
 )
-from .errors import EXIT_NOT_CONVERGED
+from .errors import EXIT_NOT_CONVERGED, EXIT_OK
 from .progress import Progress
-
-EXIT_CERTIFIED = 0
 
 
 def certify(args: argparse.Namespace) -> int:
-    """Exit 0 when the estimate is certified globally optimal for SE-Sync's problem, else 1."""
-    from posegraph.certification import certify as certified
-    from posegraph.certification import require_certifiable
-
+    """Exit 0 when the estimate is certified globally optimal for SE-Sync's problem, else 1.
+    After a robust run (``--robust``), the problem of the measurements it kept; the lines a
+    file marks rejected are set aside unless ``--readmit-rejected``."""
     check_paths([args.input], {"-o": args.output}, args.overwrite)
     check_output(args.output, args.to)
     inputs = Inputs(args)
     progress = Progress(talks(args), args.solver, args.max_iterations, cost_label(args))
     with progress:
         with progress.stage(f"reading {os.path.basename(args.input)}"):
-            graph = inputs.graph(args.input).graph
+            graph, _ = set_aside_rejected(inputs.graph(args.input), args.readmit_rejected)
         require_certifiable(graph)  # before any work
         check_writable(args.input, graph, args.output, to=args.to)
+        smoother = posegraph.Smoother(graph)
         progress.begin("optimising")
         with progress.interruptible(), about(args.input):
-            result = posegraph.Smoother(graph).optimize(callback=progress, **solving_options(args))
+            result = smoother.optimize(callback=progress, **solving_options(args))
         progress.end()
+        kept = smoother.without_rejected()  # a robust run's inliers; all in least squares
         with progress.stage("certifying (SE-Sync)"):
-            certificate = certified(graph)
+            certificate = posegraph.certify(kept)
         with progress.stage("refining the certified estimate"):
-            refined = graph.copy()
+            refined = kept.copy()
             refined.set_values(certificate.values)
             after = posegraph.optimize(refined, init="file").summary.final_error
         if args.output:
@@ -70,7 +71,7 @@ def certify(args: argparse.Namespace) -> int:
     }
     text = _text(args.input, result.summary.final_error, certificate, after)
     emit(args, record, text + (f"\nwrote {args.output}" if args.output else ""), inputs.warnings)
-    return EXIT_CERTIFIED if certificate.certified else EXIT_NOT_CONVERGED
+    return EXIT_OK if certificate.certified else EXIT_NOT_CONVERGED
 
 
 def _text(source: str, error: float, certificate, after: float) -> str:
@@ -85,20 +86,19 @@ def _text(source: str, error: float, certificate, after: float) -> str:
     )
 
 
-def certified_if_asked(args: argparse.Namespace, graph: posegraph.PoseGraph, progress: Progress):
-    """``optimize --certify``: the certificate of the graph's solution, or None unasked."""
+def certified_if_asked(args: argparse.Namespace, smoother: posegraph.Smoother, progress: Progress):
+    """``optimize --certify``: the certificate of the smoother's solution (of the measurements a
+    robust run kept), or None unasked."""
     if not args.certify:
         return None
     with progress.stage("certifying (SE-Sync)"):
-        return posegraph.certify(graph)
+        return posegraph.certify(smoother.without_rejected())
 
 
 def info_certificate(args: argparse.Namespace, graph: posegraph.PoseGraph, record: dict, text: str):
     """``info --certify``: optimise a copy of the graph (defaults) and certify it, adding the
     certificate to the record and text; a graph the check cannot take gets a line saying why
     (``info`` refuses nothing it could read)."""
-    from posegraph.certification import require_certifiable
-
     if not args.certify:
         return text
     try:

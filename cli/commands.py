@@ -92,7 +92,7 @@ def optimize(args: argparse.Namespace) -> int:
         if not summary.noise and summary.converged:
             with progress.stage("noise check"):
                 summary = _with_noise(graph, result, summary)
-        certificate = certified_if_asked(args, graph, progress)
+        certificate = certified_if_asked(args, smoother, progress)
         writing = args.output or args.plot or args.covariances
         with progress.stage("writing") if writing else contextlib.nullcontext():
             wrote = _write_optimised(args, read, smoother, before, kept)
@@ -201,7 +201,8 @@ def info(args: argparse.Namespace) -> int:
         **reading,
         "skipped_lines": inputs.skipped_lines,
     }
-    text = info_certificate(args, read.graph, record, format_diagnosis(diagnosis, reading))
+    kept, _ = set_aside_rejected(read, False)  # a robust run's rejections stay out
+    text = info_certificate(args, kept, record, format_diagnosis(diagnosis, reading))
     emit(args, record, text)
     return EXIT_OK
 

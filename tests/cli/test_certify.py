@@ -77,3 +77,19 @@ def test_certify_writes_the_certified_estimate_and_refuses_to_overwrite_its_inpu
     assert np.abs(written.values.as_matrix() - optimised.values.as_matrix()).max() < 1e-5
     refused = run("certify", grid_file, "-o", grid_file, check_exit=2)
     assert "refusing to overwrite an input file with -o" in refused.stderr
+
+
+def test_a_robust_run_is_certified_on_the_measurements_it_kept(tmp_path):
+    from posegraph_datasets.outliers import add_false_loops
+
+    graph, _ = grid(size=3, seed=9)
+    corrupted, false = add_false_loops(graph, 0.2, seed=9)
+    path = tmp_path / "false_loops.g2o"
+    write_graph(corrupted, str(path))
+    document = run_json("certify", path, "--robust", "gnc")
+    assert document["certificate"]["certified"]
+    least_squares = run_json("certify", path)  # every loop, the false ones too
+    assert least_squares["certificate"]["objective"] > 10 * document["certificate"]["objective"]
+    assert run_json("optimize", path, "--robust", "gnc", "--certify")["certificate"][
+        "objective"
+    ] == (pytest.approx(document["certificate"]["objective"], rel=1e-6))
