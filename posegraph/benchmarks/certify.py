@@ -84,10 +84,7 @@ def main(arguments: list[str] | None = None) -> None:
         "λ_min(S) | verdict | highest rank | posegraph's error: own / from certified",
         echo=True,
     )
-    for name in args.graphs:
-        line = row(name)
-        if line is not None:
-            table.add(line)
+    table.add_present(row(name) for name in args.graphs)
 
 
 if __name__ == "__main__":

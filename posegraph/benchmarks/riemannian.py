@@ -95,10 +95,7 @@ def main(arguments: list[str] | None = None) -> None:
     table = MarkdownTable(
         "graph | posegraph | pymanopt | pymanopt / posegraph | iterations | F", echo=True
     )
-    for name in args.graphs:
-        line = row(name)
-        if line is not None:
-            table.add(line)
+    table.add_present(row(name) for name in args.graphs)
 
 
 if __name__ == "__main__":

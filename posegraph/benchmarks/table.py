@@ -20,5 +20,12 @@ class MarkdownTable:
         if self.echo:
             print(line, flush=True)
 
+    def add_present(self, rows) -> None:
+        """Append each row of an iterable, leaving out the None ones (a graph not on this
+        machine)."""
+        for row in rows:
+            if row is not None:
+                self.add(row)
+
     def __str__(self) -> str:
         return "\n".join(self.lines)
