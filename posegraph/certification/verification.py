@@ -37,16 +37,25 @@ def multipliers(data: SESyncData, y: np.ndarray) -> np.ndarray:
     return sym_block_products(y, data.product(y), data.d)
 
 
-def certificate_matrix(data: SESyncData, y: np.ndarray) -> scipy.sparse.linalg.LinearOperator:
-    """S = Q − Λ as an operator on dn-vectors."""
-    lam, d, size = multipliers(data, y), data.d, data.d * data.n
+def certificate_matrix(data: SESyncData, lam: np.ndarray) -> scipy.sparse.linalg.LinearOperator:
+    """S = Q − Λ as an operator on dn-vectors and blocks of them (Λ's blocks ``lam``)."""
+    d, size = data.d, data.d * data.n
 
     def apply(x: np.ndarray) -> np.ndarray:
-        x = np.asarray(x).reshape(-1)
-        qx = data.product(x[None, :])[0]
-        return qx - (lam @ x.reshape(-1, d, 1)).reshape(-1)
+        columns = np.asarray(x).reshape(size, -1)
+        qx = data.product(columns.T).T
+        return qx - (lam @ columns.reshape(-1, d, columns.shape[1])).reshape(size, -1)
 
-    return scipy.sparse.linalg.LinearOperator((size, size), matvec=apply, dtype=float)
+    return scipy.sparse.linalg.LinearOperator(
+        (size, size), matvec=lambda x: apply(x)[:, 0], matmat=apply, dtype=float
+    )
+
+
+def _on_rows(s, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(an orthonormal basis of Y's rows, S's eigenvalues and eigenvectors on it)."""
+    basis = np.linalg.qr(y.T)[0]
+    values, vectors = np.linalg.eigh(basis.T @ s.matmat(basis))
+    return basis, values, vectors
 
 
 def check(data: SESyncData, y: np.ndarray, tolerance: float) -> Spectrum:
@@ -55,23 +64,20 @@ def check(data: SESyncData, y: np.ndarray, tolerance: float) -> Spectrum:
     Cholesky factorisation of that matrix plus δI on the rotations succeeds exactly when it
     holds (Rosen et al. 2019, §4.2, and the Schur complement lemma). Where it fails, λ_min(S)
     and its eigenvector come from ``smallest_eigenpair``."""
-    s = certificate_matrix(data, y)
-    basis = np.linalg.qr(y.T)[0]
-    on_rows = float(np.linalg.eigvalsh(basis.T @ (s @ basis))[0])
-    if data.factor_less(multipliers(data, y), tolerance) is None:
-        return smallest_eigenpair(data, y)
-    return Spectrum(True, on_rows, None)
+    lam = multipliers(data, y)
+    s = certificate_matrix(data, lam)
+    if data.factor_less(lam, tolerance) is None:
+        return smallest_eigenpair(data, y, s)
+    return Spectrum(True, float(_on_rows(s, y)[1][0]), None)
 
 
-def smallest_eigenpair(data: SESyncData, y: np.ndarray, seed: int = 0) -> Spectrum:
-    """λ_min(S) and its eigenvector (a failed check). At a critical point S Yᵀ = 0, so the rows
-    of Y span eigenvectors of eigenvalue 0, and the rest of the spectrum is found by LOBPCG
-    (Knyazev 2001) on their orthogonal complement, preconditioned by
-    ``SESyncData.precondition``, from seeded random vectors."""
-    s = certificate_matrix(data, y)
+def smallest_eigenpair(data: SESyncData, y: np.ndarray, s, seed: int = 0) -> Spectrum:
+    """λ_min(S) and its eigenvector (a failed check; ``s``: S as ``certificate_matrix``). At a
+    critical point S Yᵀ = 0, so the rows of Y span eigenvectors of eigenvalue 0, and the rest of
+    the spectrum is found by LOBPCG (Knyazev 2001) on their orthogonal complement,
+    preconditioned by ``SESyncData.precondition``, from seeded random vectors."""
     size = s.shape[0]
-    basis = np.linalg.qr(y.T)[0]
-    on_rows = np.linalg.eigh(basis.T @ (s @ basis))
+    basis, on_values, on_vectors = _on_rows(s, y)
     preconditioner = scipy.sparse.linalg.LinearOperator(
         (size, size),
         matvec=lambda x: data.precondition(np.asarray(x).reshape(1, -1))[0],
@@ -89,8 +95,8 @@ def smallest_eigenpair(data: SESyncData, y: np.ndarray, seed: int = 0) -> Spectr
             tol=EIGEN_TOLERANCE,
             maxiter=EIGEN_ITERATIONS,
         )
-    if on_rows[0][0] < values[0]:
-        return Spectrum(False, float(on_rows[0][0]), basis @ on_rows[1][:, 0])
+    if on_values[0] < values[0]:
+        return Spectrum(False, float(on_values[0]), basis @ on_vectors[:, 0])
     return Spectrum(False, float(values[0]), vectors[:, 0])
 
 
