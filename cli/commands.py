@@ -48,6 +48,7 @@ from .common import (
     noting_interruption,
     output_graph,
     reading_record,
+    reports,
     set_aside_rejected,
     solving_options,
     talks,
@@ -89,7 +90,7 @@ def optimize(args: argparse.Namespace) -> int:
         progress.end()
         summary = noting_interruption(progress, result.summary)
         _refuse_non_finite(summary, args.input)
-        if not summary.noise and summary.converged:
+        if not summary.noise and summary.converged and reports(args):
             with progress.stage("noise check"):
                 summary = _with_noise(graph, result, summary)
         certificate = certified_if_asked(args, smoother, progress)

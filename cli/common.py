@@ -102,6 +102,12 @@ def talks(args: argparse.Namespace) -> bool:
     return not (args.json or args.quiet)
 
 
+def reports(args: argparse.Namespace) -> bool:
+    """Whether the command prints its results (``emit``): as JSON, or as text unless
+    ``--quiet``. What only the report holds is not computed otherwise."""
+    return args.json or not args.quiet
+
+
 def emit(args: argparse.Namespace, record: dict, text: str, warnings: list[str] = ()) -> None:
     """Print the results: the JSON document, or the ``warnings`` (on stderr) and the text."""
     if args.json:

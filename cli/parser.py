@@ -33,6 +33,14 @@ class _Groups(NamedTuple):
     solving: argparse.ArgumentParser
 
 
+class _Version(argparse.Action):
+    """``--version``: the installed version, looked up only when asked for."""
+
+    def __call__(self, parser: argparse.ArgumentParser, *_) -> None:
+        print(f"posegraph {posegraph.__version__}")
+        parser.exit()
+
+
 def parser() -> argparse.ArgumentParser:
     """The whole parser: the shared groups, then each subcommand's builder."""
     top = argparse.ArgumentParser(
@@ -40,7 +48,7 @@ def parser() -> argparse.ArgumentParser:
         description="Pose-graph optimisation on Lie groups (SE2, SE3, Sim3).",
         epilog="Run 'posegraph COMMAND --help' for a command's options and examples.",
     )
-    top.add_argument("--version", action="version", version=f"posegraph {posegraph.__version__}")
+    top.add_argument("--version", action=_Version, nargs=0, help="show the version and exit")
     groups = _Groups(options.common(), options.reading(), options.solving())
     sub = top.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for add in (

@@ -1,7 +1,5 @@
 """posegraph: pose-graph optimisation on Lie groups (SE2, SE3, Sim3)."""
 
-from importlib.metadata import PackageNotFoundError, version
-
 from .analysis.marginals import marginals, relative_covariances
 from .api import optimize
 from .certification import Certificate, certify
@@ -15,10 +13,19 @@ from .sim3.scale_drift import correct_scale_drift
 from .smoother import Smoother
 from .solvers import Result, SolverOptions
 
-try:
-    __version__ = version("posegraph")
-except PackageNotFoundError:  # running from a source tree that is not installed
-    __version__ = "0+unknown"
+
+def __getattr__(name: str) -> str:
+    """``__version__``, read from the installed package's metadata on first use (importing
+    ``importlib.metadata`` would slow every start of the command line)."""
+    if name != "__version__":
+        raise AttributeError(f"module 'posegraph' has no attribute {name!r}")
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("posegraph")
+    except PackageNotFoundError:  # running from a source tree that is not installed
+        return "0+unknown"
+
 
 __all__ = [
     "Certificate",

@@ -12,7 +12,6 @@ import dataclasses
 from typing import ClassVar
 
 import numpy as np
-import scipy.linalg
 
 from .base import LieGroup
 
@@ -38,9 +37,13 @@ class MatrixGroup(LieGroup):
 
     @classmethod
     def exp(cls, tangent: np.ndarray):
+        import scipy.linalg  # on use: the command line's start does without it
+
         return cls(scipy.linalg.expm(cls.hat(tangent)))
 
     def log(self) -> np.ndarray:
+        import scipy.linalg
+
         n = self.matrix_size
         flat = self.matrix.reshape(-1, n, n)
         logs = np.stack([np.real(scipy.linalg.logm(m)) for m in flat])

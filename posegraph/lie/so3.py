@@ -157,17 +157,30 @@ def svd_of_finite(matrices: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndar
     return u, singular, vt
 
 
+NEARLY_ORTHONORMAL = 1e-6
+"""Below this ‖MᵀM − I‖_F (and with det M > 0), ``project_to_rotation`` iterates twice in
+place of an SVD: to within rounding from there."""
+
+
 def project_to_rotation(matrix: np.ndarray) -> np.ndarray:
     """The nearest rotation matrix (Frobenius norm) of (…, d, d) arrays: by SVD with the
     determinant fixed to +1, or for d = 2 in closed form, θ = atan2(m₁₀ − m₀₁, m₀₀ + m₁₁),
     which maximises tr(R(θ)ᵀ M) = (m₀₀ + m₁₁) cos θ + (m₁₀ − m₀₁) sin θ. NaN where the matrix
-    is not finite."""
+    is not finite. A rotation off by rounding (``NEARLY_ORTHONORMAL``) takes two steps of
+    X ← X (3I − XᵀX)/2, which converges quadratically to the orthogonal polar factor (Björck &
+    Bowie 1971), the nearest orthogonal matrix."""
     matrix = np.asarray(matrix, float)
     if matrix.shape[-1] == 2:
         theta = np.arctan2(
             matrix[..., 1, 0] - matrix[..., 0, 1], matrix[..., 0, 0] + matrix[..., 1, 1]
         )
         return rotation_matrix_2d(theta)
+    identity = np.eye(matrix.shape[-1])
+    drift = np.linalg.norm(np.swapaxes(matrix, -1, -2) @ matrix - identity, axis=(-2, -1))
+    if np.all(drift < NEARLY_ORTHONORMAL) and np.all(np.linalg.det(matrix) > 0):
+        for _ in range(2):
+            matrix = matrix @ (1.5 * identity - 0.5 * np.swapaxes(matrix, -1, -2) @ matrix)
+        return matrix
     u, _, vt = svd_of_finite(matrix)
     d = np.sign(np.linalg.det(u @ vt))
     u = u.copy()

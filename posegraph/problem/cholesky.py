@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse
-import scipy.sparse.linalg
 
 from .selected_inversion import SupernodalFactor, inverse_blocks
 
@@ -255,6 +254,8 @@ class ScipyCholesky:
         self._permuted_indices, self._permuted_indptr = permuted.indices, permuted.indptr
 
     def factorize(self, data: np.ndarray) -> None:
+        import scipy.sparse.linalg  # on use: where CHOLMOD serves, a start does without it
+
         try:
             if self._order is None:
                 matrix = self._matrix(data, self._indices, self._indptr)

@@ -10,7 +10,8 @@ part of Σ = A⁻¹ = L⁻ᵀ L⁻¹ from C on is the inverse of the trailing pa
 ACM TOMS 37(4)). Σ_RR lies in the pattern of the columns R, which are ancestors of C in the
 elimination tree, so the supernodes are swept from the root down, and the entries in chosen
 columns need only the supernodes on their paths to the root. The work is that of the numeric
-factorisation; nothing of size n × n is formed.
+factorisation; nothing of size n × n is formed. Supernodes at one depth of the tree do not
+depend on each other: those of one depth and shape are computed together, as stacks.
 """
 
 from __future__ import annotations
@@ -38,6 +39,11 @@ class SupernodalFactor:
         has_rows = self.height > self.width
         first_row_below = indices[indptr[self.first[has_rows]] + self.width[has_rows]]
         self.parent[has_rows] = self.supernode_of[first_row_below]
+        self.depth = np.zeros(self.first.size, dtype=np.int64)
+        ancestor = self.parent.copy()
+        while np.any(ancestor >= 0):
+            self.depth += ancestor >= 0
+            ancestor = np.where(ancestor >= 0, self.parent[ancestor], -1)
         # An inverse is kept as one flat buffer: supernode s's (height, width) row-major block
         # at offset[s]. Row keys s·n + row of every supernode, sorted, locate entries in it.
         self.offset = np.concatenate([[0], np.cumsum(self.height * self.width)])
@@ -50,16 +56,6 @@ class SupernodalFactor:
         """Row indices of supernode s: its own columns, then the rows R below them."""
         start = self._indptr[self.first[s]]
         return self._indices[start : start + self.height[s]]
-
-    def lower(self, s: int) -> np.ndarray:
-        """L's dense (height, width) block of supernode s (zero above the diagonal)."""
-        first, width, height = self.first[s], self.width[s], self.height[s]
-        start, stop = self._indptr[first], self._indptr[first + width]
-        column = np.repeat(np.arange(width), height - np.arange(width))
-        row = np.arange(stop - start) - (self._indptr[first + column] - start) + column
-        block = np.zeros((height, width))
-        block[row, column] = self._data[start:stop]
-        return block
 
     def block(self, buffer: np.ndarray, s: int) -> np.ndarray:
         """Supernode s's (height, width) view into an inverse's ``buffer``."""
@@ -88,40 +84,62 @@ class SupernodalFactor:
         return self.offset[s] + row * self.width[s] + columns - self.first[s]
 
 
-def _trailing_inverse(
-    factor: SupernodalFactor, inverse: np.ndarray, rows: np.ndarray
-) -> np.ndarray:
-    """Σ_RR (dense, symmetric) for the rows R below a supernode, gathered from the blocks of the
-    ancestors that hold R's columns (already in ``inverse``)."""
-    gathered = np.zeros((rows.size, rows.size))
-    holder = factor.supernode_of[rows]
-    starts = np.flatnonzero(np.concatenate([[True], holder[1:] != holder[:-1]]))
-    for start, stop in zip(starts, np.append(starts[1:], rows.size), strict=True):
-        t = holder[start]
-        within = np.searchsorted(factor.rows(t), rows[start:])
-        columns = rows[start:stop] - factor.first[t]
-        gathered[start:, start:stop] = factor.block(inverse, t)[within][:, columns]
-        gathered[start:stop, stop:] = gathered[stop:, start:stop].T
-    return gathered
+def _lower_blocks(factor: SupernodalFactor, supernodes: np.ndarray, height: int, width: int):
+    """L's dense (g, height, width) blocks of supernodes of one shape (zero above the diagonal):
+    column c of a supernode holds its rows from the c-th on, contiguous in L's data."""
+    row, column = np.arange(height)[:, None], np.arange(width)[None, :]
+    starts = factor._indptr[factor.first[supernodes][:, None] + np.arange(width)]  # (g, width)
+    index = starts[:, None, :] + np.maximum(row - column, 0)
+    return np.where(row >= column, factor._data[index], 0.0)
+
+
+def _trailing_inverses(factor: SupernodalFactor, inverse: np.ndarray, rows: np.ndarray):
+    """Σ_RR (g, k, k) for the rows R (g, k) below supernodes of one shape, gathered from the
+    blocks of the ancestors that hold R's columns (already in ``inverse``). Entry (Rᵢ, Rⱼ),
+    i ≥ j, lies in the block of the supernode t holding Rⱼ, in its row Rᵢ; where Rᵢ lies among
+    t's rows is looked up once per run of R's columns that t holds."""
+    count, k = rows.shape
+    holder = factor.supernode_of[rows]  # (g, k), non-decreasing along k
+    run_start = np.maximum.accumulate(
+        np.where(np.diff(holder, axis=1, prepend=-1) != 0, np.arange(k), 0), axis=1
+    )
+    lower = np.tril(np.ones((k, k), dtype=bool))
+    looked_up = lower & (run_start[:, None, :] == np.arange(k))  # (g, i, j): j starts a run
+    g, i, j = np.nonzero(looked_up)
+    keys = holder[g, j] * factor.size + rows[g, i]
+    row_in_holder = np.zeros((count, k, k), dtype=np.int64)
+    row_in_holder[g, i, j] = (
+        np.searchsorted(factor._row_keys, keys) - factor._row_offset[holder[g, j]]
+    )
+    row_in_holder = np.take_along_axis(row_in_holder, run_start[:, None, :], axis=2)
+    width = factor.width[holder][:, None, :]
+    within = (rows - factor.first[holder])[:, None, :]
+    positions = factor.offset[holder][:, None, :] + row_in_holder * width + within
+    positions = np.where(lower, positions, np.swapaxes(positions, 1, 2))
+    return inverse[positions]
 
 
 def selected_inverse(factor: SupernodalFactor, columns: np.ndarray) -> np.ndarray:
     """Σ = (L Lᵀ)⁻¹ in L's pattern (a buffer laid out by ``factor.offset``), computed in the
     supernodes that hold ``columns`` and their ancestors; zero elsewhere."""
     inverse = np.zeros(factor.offset[-1])
-    for s in factor.path_to_root(columns)[::-1]:
-        width = factor.width[s]
-        lower = factor.lower(s)
-        # numpy's LAPACK throughout: alternating with scipy's OpenBLAS (a second thread pool)
-        # made each call's time vary up to fourfold on two cores.
-        diagonal_inverse = np.linalg.inv(lower[:width])  # L_CC⁻¹
-        sigma = factor.block(inverse, s)
-        sigma[:width] = diagonal_inverse.T @ diagonal_inverse
-        below = factor.rows(s)[width:]
-        if below.size:
-            u = lower[width:] @ diagonal_inverse
-            sigma[width:] = -_trailing_inverse(factor, inverse, below) @ u
-            sigma[:width] -= u.T @ sigma[width:]
+    needed = factor.path_to_root(columns)
+    shapes = np.stack([factor.depth[needed], factor.width[needed], factor.height[needed]])
+    keys, group = np.unique(shapes, axis=1, return_inverse=True)
+    for index, (_, width, height) in enumerate(keys.T):  # by depth, from the root down
+        supernodes = needed[group.ravel() == index]
+        lower = _lower_blocks(factor, supernodes, height, width)
+        diagonal_inverse = np.linalg.inv(lower[:, :width])  # L_CC⁻¹
+        sigma = np.zeros((supernodes.size, height, width))
+        sigma[:, :width] = np.swapaxes(diagonal_inverse, 1, 2) @ diagonal_inverse
+        if height > width:
+            first_entries = factor._indptr[factor.first[supernodes]]
+            rows = factor._indices[first_entries[:, None] + np.arange(width, height)]
+            u = lower[:, width:] @ diagonal_inverse
+            sigma[:, width:] = -_trailing_inverses(factor, inverse, rows) @ u
+            sigma[:, :width] -= np.swapaxes(u, 1, 2) @ sigma[:, width:]
+        places = factor.offset[supernodes][:, None] + np.arange(height * width)
+        inverse[places] = sigma.reshape(supernodes.size, -1)
     return inverse
 
 

@@ -27,6 +27,7 @@ with them the least-squares solution over a set of inliers, stay the file's."""
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Callable
 
 import numpy as np
@@ -163,7 +164,7 @@ def _estimate(tests: MeasurementTests, inliers: np.ndarray) -> Estimate:
     for index, kind in enumerate(KINDS):
         members = inliers & telling & (tests.kinds == index)
         if np.count_nonzero(members) >= FEWEST:
-            expected = _CHI2_MEDIAN[tests.rank[members]]
+            expected = _chi2_medians()[tests.rank[members]]
             median[kind] = float(np.median(expected / tests.tested[members]))
     gross = tests.tested * _by_measurement(tests, median) > OFF_BY * tests.limits
     for index, kind in enumerate(KINDS):
@@ -175,8 +176,10 @@ def _estimate(tests: MeasurementTests, inliers: np.ndarray) -> Estimate:
     return Estimate(median, tail, tests.classes(inliers), int(np.count_nonzero(gross & inliers)))
 
 
-_CHI2_MEDIAN = np.array([0.0] + [default_width(k, 0.5) ** 2 for k in range(1, 8)])
-"""The median of χ²_k by k, to the largest tangent (Sim3's 7)."""
+@functools.cache
+def _chi2_medians() -> np.ndarray:
+    """The median of χ²_k by k, to the largest tangent (Sim3's 7)."""
+    return np.array([0.0] + [default_width(k, 0.5) ** 2 for k in range(1, 8)])
 
 
 def _factors(scales: dict[str, float]) -> np.ndarray:

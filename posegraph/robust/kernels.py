@@ -19,7 +19,6 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-from scipy.special import gammaincinv
 
 KERNELS = ("huber", "cauchy", "geman-mcclure", "tukey", "dcs")
 
@@ -73,8 +72,10 @@ def default_width(dof: int, quantile: float = 0.99) -> float:
 
     χ²_k is Gamma(k/2, scale 2), so its quantile is 2 P⁻¹(k/2, q) with P the regularised lower
     incomplete gamma function (Abramowitz & Stegun §26.4). scipy.special serves it without
-    importing scipy.stats, which would slow every start of the command line.
+    importing scipy.stats, and is imported on use, not with the command line.
     """
+    from scipy.special import gammaincinv
+
     return float(np.sqrt(2.0 * gammaincinv(0.5 * dof, quantile)))
 
 

@@ -148,7 +148,9 @@ def measurement_tests(graph: PoseGraph, values: LieGroup) -> MeasurementTests:
 
 def limits(ranks: np.ndarray) -> np.ndarray:
     """χ²_rank(``QUANTILE``) of each rank (∞ for 0: nothing measured, nothing to test)."""
-    return np.array([default_width(int(k), QUANTILE) ** 2 if k else np.inf for k in ranks])
+    distinct, index = np.unique(ranks, return_inverse=True)
+    of_distinct = [default_width(int(k), QUANTILE) ** 2 if k else np.inf for k in distinct]
+    return np.array(of_distinct, dtype=float)[index.reshape(np.shape(ranks))]
 
 
 def noise_consistency(graph: PoseGraph, values: LieGroup) -> list[NoiseClass]:
