@@ -46,7 +46,7 @@ def warm_start(
     """
     if not graph.initialized.all():
         _initialize_new_nodes(graph, options)
-    if least_squares and choose(graph) == "chordal" and not _agree_with_solution(graph, solution):
+    if least_squares and not _agree_with_solution(graph, solution) and choose(graph) == "chordal":
         graph.set_values(initialize(graph, "chordal"), check=False)
         return RESTART
     return "warm start"
@@ -103,12 +103,12 @@ def _grew_by_a_tree(graph: PoseGraph, solution: Solution) -> bool:
     old, new_edges = len(solution.fixed), slice(len(solution.edges), None)
     return (
         solution.optimal
-        and graph.edges.starts_with(solution.edges)
         and len(graph.priors) == len(solution.priors)
-        and graph.priors.starts_with(solution.priors)
+        and _hangs_a_tree(graph.edges.i[new_edges], graph.edges.j[new_edges], old, graph.num_nodes)
         and np.array_equal(graph.fixed[:old], solution.fixed)
         and not graph.fixed[old:].any()
-        and _hangs_a_tree(graph.edges.i[new_edges], graph.edges.j[new_edges], old, graph.num_nodes)
+        and graph.edges.starts_with(solution.edges)
+        and graph.priors.starts_with(solution.priors)
     )
 
 
@@ -123,8 +123,8 @@ def solution_extends(graph: PoseGraph, solution: Solution) -> bool:
     new_edges = graph.edges.subset(slice(len(solution.edges), None))
     return (
         solution.summary.converged
-        and graph.values[:old].same_as(solution.values)
         and _grew_by_a_tree(graph, solution)
+        and graph.values[:old].same_as(solution.values)
         and bool(np.all(information_ranks(new_edges.information) == graph.group.dof))
     )
 
