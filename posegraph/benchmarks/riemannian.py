@@ -3,8 +3,9 @@
 Usage: ``python -m posegraph.benchmarks.riemannian [--graphs intel sphere2500 ...]`` (needs
 ``pip install pymanopt``). From the rotations of posegraph's optimum, both minimise
 F(Y) = tr(Y Q Yᵀ) on SO(d)ⁿ's Stiefel embedding to the gradient norm ``certify`` asks for,
-with the same Q products, Euclidean gradient and Hessian and the same preconditioner
-((Q + εI)⁻¹), so that the table compares the two solvers' machinery: time, iterations, F.
+with the same Q products, Euclidean gradient and Hessian and the same preconditioner (Newton's
+system over poses, ``certification.poses``, factorised at each new point), so that the table
+compares the two solvers' machinery: time, iterations, F.
 """
 
 from __future__ import annotations
@@ -18,8 +19,9 @@ from posegraph_datasets.paths import benchmark_graph
 
 from ..api import optimize
 from ..certification.data import SESyncData, sesync_data
+from ..certification.poses import PosePreconditioner
 from ..certification.staircase import GRADIENT_TOLERANCE, RELATIVE_TOLERANCE
-from ..certification.stiefel import blocks, joined, project
+from ..certification.stiefel import blocks, joined, sym_block_products
 from ..certification.trust_region import minimize
 from ..io import read_graph
 from .table import MarkdownTable
@@ -46,8 +48,14 @@ def pymanopt_minimum(data: SESyncData, y: np.ndarray, tolerance: float):
     def hessian(x, v):
         return blocks(2.0 * data.product(joined(v)), d)
 
+    poses, factorized_at = PosePreconditioner(data), [None]
+
     def precondition(x, u):
-        return blocks(project(joined(x), data.precondition(joined(u)), d), d)
+        y = joined(x)
+        if factorized_at[0] is None or not np.array_equal(factorized_at[0], y):
+            poses.factorize(y, sym_block_products(y, data.product(y), d))
+            factorized_at[0] = y
+        return blocks(poses(joined(u)), d)
 
     problem = pymanopt.Problem(
         manifold,

@@ -12,6 +12,7 @@ Laplacian, factorised once (``problem.cholesky``)."""
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numpy as np
 import scipy.sparse
@@ -49,15 +50,30 @@ class SESyncData:
     tau: np.ndarray
     laplacian_factor: object
     """The Cholesky factor of Ā Ω Āᵀ, Ω = diag(τ)."""
-    preconditioner: object
-    """The Cholesky factor of ``joint`` + εI on the rotations (ε: 1e-6 of the largest diagonal
-    entry, as Q can be singular along the global rotation): it applies (Q + εI)⁻¹, SE-Sync's
-    regularised Cholesky preconditioner."""
     scale: float
     """The largest diagonal entry of L(G̃ρ) + T Ω Tᵀ: the size of Q's entries."""
     joint: scipy.sparse.csc_matrix
     """The sparse matrix of the cost in the reduced translations and the rotations,
     [[Ā Ω Āᵀ, Ā Ω Tᵀ], [T Ω Āᵀ, L(G̃ρ) + T Ω Tᵀ]], of which Q is the Schur complement."""
+    edge_i: np.ndarray
+    """Each edge's first node (m,)."""
+    edge_j: np.ndarray
+    """Each edge's second node (m,)."""
+    kappa: np.ndarray
+    """κₑ (m,)."""
+    edge_rotations: np.ndarray
+    """R̃ₑ (m, d, d)."""
+    edge_translations: np.ndarray
+    """t̃ₑ (m, d)."""
+
+    @functools.cached_property
+    def preconditioner(self) -> object:
+        """The Cholesky factor of ``joint`` + εI on the rotations (ε: 1e-6 of the largest
+        diagonal entry, as Q can be singular along the global rotation): it applies (Q + εI)⁻¹,
+        SE-Sync's regularised Cholesky preconditioner. Factorised on first use: above rank d
+        and for a failed check."""
+        shift = np.r_[np.zeros(self.n - 1), np.full(self.d * self.n, 1e-6 * self.scale)]
+        return _factorized(self.joint + scipy.sparse.diags(shift))
 
     def precondition(self, y: np.ndarray) -> np.ndarray:
         """Y (Q + εI)⁻¹ for Y of shape (k, dn): the rotation block of the solution of the
@@ -154,7 +170,6 @@ def sesync_data(graph: PoseGraph) -> SESyncData:
     coupling = incidence @ scipy.sparse.diags(tau) @ translations.T
     joint = scipy.sparse.bmat([[reduced, coupling], [coupling.T, rotational]]).tocsc()
     scale = float(rotational.diagonal().max())
-    regularised = joint + scipy.sparse.diags(np.r_[np.zeros(n - 1), np.full(d * n, 1e-6 * scale)])
     return SESyncData(
         d,
         n,
@@ -163,9 +178,13 @@ def sesync_data(graph: PoseGraph) -> SESyncData:
         incidence,
         tau,
         _factorized(reduced),
-        _factorized(regularised),
         scale,
         joint,
+        i,
+        j,
+        kappa,
+        rotation,
+        translation,
     )
 
 
