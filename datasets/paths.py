@@ -70,3 +70,13 @@ def gtsam_data_dir() -> Path | None:
         return None
     folder = Path(gtsam.__file__).parent / "Data"
     return folder if folder.is_dir() else None
+
+
+def benchmark_or_gtsam_graph(name: str) -> Path | None:
+    """``benchmark_graph(name)``, else ``name`` in gtsam's ``Data/`` (w10000.graph, say); None
+    where neither has it."""
+    path = benchmark_graph(name)
+    if path is None and gtsam_data_dir() is not None:
+        candidate = gtsam_data_dir() / name
+        path = candidate if candidate.is_file() else None
+    return path

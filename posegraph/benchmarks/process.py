@@ -19,7 +19,7 @@ import sys
 import time
 from pathlib import Path
 
-from posegraph_datasets.paths import benchmark_graph, gtsam_data_dir
+from posegraph_datasets.paths import benchmark_or_gtsam_graph
 
 from .table import MarkdownTable
 from .timing import at_least
@@ -44,15 +44,6 @@ print(graph.error(result))
 default parameters, the first pose held by a constrained prior."""
 
 POSEGRAPH = "from posegraph_cli.main import main; main()"
-
-
-def graph_path(name: str) -> Path | None:
-    """``name`` in ``../shared/datasets`` or gtsam's ``Data/``; None where neither has it."""
-    path = benchmark_graph(name)
-    if path is None and gtsam_data_dir() is not None:
-        candidate = gtsam_data_dir() / name
-        path = candidate if candidate.is_file() else None
-    return path
 
 
 def dimension(path: Path) -> int:
@@ -92,7 +83,7 @@ def run(command: list[str]) -> float:
 
 def row(name: str, runs: int) -> str | None:
     """One table row; None where the graph is not on this machine."""
-    path = graph_path(name)
+    path = benchmark_or_gtsam_graph(name)
     if path is None:
         return None
     timed = commands(path)
