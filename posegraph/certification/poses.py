@@ -81,9 +81,9 @@ class PosePreconditioner:
         return jacobian
 
     def residual_norm(self, v: np.ndarray) -> float:
-        """‖V‖ without pose 0's block: the preconditioner keeps pose 0's rotation (the gauge),
-        so conjugate gradients solve within the steps that hold it, whose residual has no
-        other part at their best (a tangent at rank d is Rᵢ kᵢ^, all of it in kᵢ)."""
+        """‖V‖ without pose 0's block: the preconditioner holds pose 0's rotation (the gauge),
+        so conjugate gradients solve Newton's system over the other poses, and this is the
+        norm of its residual (at rank d a tangent's block is Rᵢ kᵢ^, all of it rotation)."""
         return float(np.linalg.norm(v[:, self.d :]))
 
     def __call__(self, v: np.ndarray) -> np.ndarray:
