@@ -66,7 +66,9 @@ DECISION_SOLVES = 2
 """Least-squares solves that a call's previous decisions get to settle in: the decisions with
 the new measurements kept, then once more without what misfits there (``_settle_decisions``);
 settling them fully costs as much as GNC's stages where every step brings a false loop."""
-STAGE_ITERATIONS = 10
+STAGE_ITERATIONS = 5
+"""Most Levenberg-Marquardt iterations of a graduated stage's solve: the next stage, a little
+less convex, goes on from where it stops."""
 STAGE_RELATIVE_DECREASE = 1e-5
 
 
