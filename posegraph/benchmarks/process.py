@@ -47,12 +47,13 @@ POSEGRAPH = "from posegraph_cli.main import main; main()"
 
 
 def dimension(path: Path) -> int:
-    """2 or 3, from the file's first vertex line."""
+    """2 or 3, from the tag of the file's first vertex or edge line."""
     with open(path) as lines:
         for line in lines:
-            if line.startswith("VERTEX"):
-                return 3 if "SE3" in line.split()[0] else 2
-    raise ValueError(f"{path}: no vertex line")
+            if line.startswith(("VERTEX", "EDGE")):
+                tag = line.split()[0]
+                return 3 if "SE3" in tag or tag.endswith("3") else 2
+    raise ValueError(f"{path}: no vertex or edge line")
 
 
 def commands(path: Path) -> dict[str, list[str]]:
