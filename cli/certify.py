@@ -129,14 +129,16 @@ def verdict(certificate) -> str:
 
 
 def certificate_lines(certificate) -> list[str]:
-    """The summary's lines on a certificate: objective and bound, λ_min, the checks, time."""
+    """The summary's lines on a certificate: objective, λ_min, the checks, time; and where it
+    is not certified, the relaxation's lower bound on the objective (where it is, the objective
+    is the optimum, and the bound, weakened by the tolerance, says less)."""
     checks = " → ".join(
         f"rank {step['rank']}: {'passed' if step['certified'] else 'failed'}"
         for step in certificate.steps
     )
+    bound = "" if certificate.certified else f" (lower bound {certificate.lower_bound:.10g})"
     return [
-        f"  SE-Sync objective  {certificate.objective:.10g}"
-        f" (lower bound {certificate.lower_bound:.10g})",
+        f"  SE-Sync objective  {certificate.objective:.10g}{bound}",
         f"  λ_min(Q − Λ)       {certificate.smallest_eigenvalue:.3g}"
         f" (certified if ≥ −{certificate.tolerance:.3g})",
         f"  checks             {checks}",
