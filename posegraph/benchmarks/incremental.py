@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 from posegraph_datasets.outliers import add_false_loops, rejection_rates
-from posegraph_datasets.paths import gtsam_data_dir
+from posegraph_datasets.paths import benchmark_or_gtsam_graph
 
 from ..api import optimize
 from ..graph import PoseGraph
@@ -241,11 +241,8 @@ def main() -> None:
         "--gtsam", action="store_true", help="stream into gtsam LM and iSAM2 too, side by side"
     )
     args = parser.parse_args()
-    if args.graph:
-        path = Path(args.graph)
-    elif gtsam_data_dir() is not None:
-        path = gtsam_data_dir() / "w10000.graph"
-    else:
+    path = Path(args.graph) if args.graph else benchmark_or_gtsam_graph("w10000.graph")
+    if path is None:
         raise SystemExit("no graph given and gtsam's Data/ is not installed")
     print(run(path, args.step, args.robust, args.false_loops, args.seed, args.gtsam))
 

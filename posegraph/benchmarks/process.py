@@ -21,6 +21,8 @@ from pathlib import Path
 
 from posegraph_datasets.paths import benchmark_or_gtsam_graph
 
+from ..io.tags import G2O_TAGS, TORO_TAGS
+from ..lie import SE3
 from .table import MarkdownTable
 from .timing import at_least
 
@@ -47,12 +49,13 @@ POSEGRAPH = "from posegraph_cli.main import main; main()"
 
 
 def dimension(path: Path) -> int:
-    """2 or 3, from the tag of the file's first vertex or edge line."""
+    """2 or 3, from the group of the file's first vertex or edge line (the reader's tags)."""
+    tags = {**G2O_TAGS, **TORO_TAGS}
     with open(path) as lines:
-        for line in lines:
-            if line.startswith(("VERTEX", "EDGE")):
-                tag = line.split()[0]
-                return 3 if "SE3" in tag or tag.endswith("3") else 2
+        for words in map(str.split, lines):
+            tag = tags.get(words[0]) if words else None
+            if tag is not None and tag.kind in ("vertex", "edge"):
+                return 3 if tag.group is SE3 else 2
     raise ValueError(f"{path}: no vertex or edge line")
 
 

@@ -46,28 +46,32 @@ class PosePreconditioner:
         """The Hessian at the rotations ``y`` (d × dn) with Λ's blocks ``multipliers``, or
         where it is not positive definite (far from a minimum), its Gauss-Newton part,
         factorised."""
-        data, d, n = self.data, self.d, self.data.n
+        d = self.d
         self.tangents = blocks(y, d)[:, None] @ self.skew  # (n, p, d, d): Rᵢ G_a
-        jacobians = self._jacobians(
-            data.edge_i, data.edge_j, data.edge_rotations, data.edge_translations
-        )
+        jacobians = self._jacobians()
         normal = np.swapaxes(jacobians, 1, 2) @ (jacobians * self.weights)
-        second = np.zeros((n, self.dof, self.dof))
+        second = np.zeros((self.data.n, self.dof, self.dof))
         products = self.skew[:, None] @ self.skew[None]  # G_a G_b
         second[:, d:, d:] = np.einsum("abij,nji->nab", products, multipliers)  # tr(G_a G_b Λᵢ)
-        try:
-            self.pattern.factorize(
-                self.pattern.matrix_data(np.concatenate([normal.ravel(), second.ravel()]))
-            )
-        except NotPositiveDefinite:
-            second[:] = 0.0
-            self.pattern.factorize_regularized(
-                self.pattern.matrix_data(np.concatenate([normal.ravel(), second.ravel()]))
-            )
 
-    def _jacobians(self, i, j, rotation, translation) -> np.ndarray:
+        def matrix(unary: np.ndarray) -> np.ndarray:
+            return self.pattern.matrix_data(np.concatenate([normal.ravel(), unary.ravel()]))
+
+        try:
+            self.pattern.factorize(matrix(second))
+        except NotPositiveDefinite:
+            self.pattern.factorize_regularized(matrix(np.zeros_like(second)))
+
+    def _jacobians(self) -> np.ndarray:
         """Each edge's Jacobian (m, d² + d, 2 dof) of (vec(Rⱼ − Rᵢ R̃), tⱼ − tᵢ − Rᵢ t̃) in
         (δtᵢ, kᵢ, δtⱼ, kⱼ)."""
+        data = self.data
+        i, j, rotation, translation = (
+            data.edge_i,
+            data.edge_j,
+            data.edge_rotations,
+            data.edge_translations,
+        )
         d, dof, m = self.d, self.dof, i.size
         jacobian = np.zeros((m, d * d + d, 2 * dof))
         at_i, at_j = self.tangents[i], self.tangents[j]  # (m, p, d, d)
