@@ -2,14 +2,15 @@
 Carlone 2020, "Graduated Non-Convexity for Robust Spatial Perception", Alg. 1), then a
 consistency pass and a local search.
 
-1. Solve least squares; set μ = min c²/(2s − c²) over the edges with s > c² (c²/(2 s_max − c²)
-   for one width), where the surrogate is convex.
+1. Solve least squares (``START_ITERATIONS`` at most); set μ = min c²/(2s − c²) over the edges
+   with s > c² (c²/(2 s_max − c²) for one width), where the surrogate is convex.
 2. Repeat: weigh the edges by the TLS-GNC weights of their current residuals, solve the weighted
    problem, raise μ by 1.4; until the weights are binary. Edges of weight 0 are left out of the
    linear system (the random fill-in of false loops would dominate the cost).
    Yang et al. solve every stage globally. Here a stage is solved twice over: warm-started from
-   the previous stage, and (SE2, SE3, Sim3) from the chordal relaxation of the weighted
-   problem; the run that ends with the lower TLS objective Σ min(s, c²) is kept.
+   the previous stage (at the λ where its Levenberg-Marquardt left off), and (SE2, SE3, Sim3)
+   from the chordal relaxation of the weighted problem; the run that ends with the lower TLS
+   objective Σ min(s, c²) is kept.
 3. Consistency: from the chordal relaxation of the kept (outlier-free) edges, solve least
    squares as ``optimize`` would (a fresh start, with the caller's options), keep every edge
    with s ≤ c² at the solution, and repeat until the kept set no longer changes. This re-admits
@@ -70,6 +71,10 @@ STAGE_ITERATIONS = 5
 """Most Levenberg-Marquardt iterations of a graduated stage's solve: the next stage, a little
 less convex, goes on from where it stops."""
 STAGE_RELATIVE_DECREASE = 1e-5
+START_ITERATIONS = 20
+"""Most Levenberg-Marquardt iterations of least squares over every edge, GNC's start: with
+false loops its minimum is no estimate, only where μ starts, and Levenberg-Marquardt crawls
+towards it."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -114,11 +119,24 @@ def _stages(graph, mask, width_sq, options, start: Result, restart: bool, run: R
         work.set_values(initialize(work, "chordal") if restart else result.values, check=False)
         label = f"gnc round {rounds} ({'chordal' if restart else 'warm'})"
         result = run.solve(work, stage_options, label, system=system)
+        if not restart:
+            stage_options = _continued(stage_options, result)
         s = between_squares(result.values, graph.edges)
         if rounds > 1 and np.all((weights[mask] < 1e-6) | (weights[mask] > 1.0 - 1e-6)):
             break
         mu *= MU_FACTOR
     return result, weights
+
+
+def _continued(options: SolverOptions, result: Result) -> SolverOptions:
+    """``options`` whose Levenberg-Marquardt starts at the λ where ``result``'s solve left it:
+    a warm stage goes on from the last one's solution, where a λ small enough for its start
+    proposes steps that the less convex surrogate rejects, more than a stage's few iterations
+    can raise it past. Other methods' options stand."""
+    damping = [record.damping for record in result.summary.iterations if record.damping > 0]
+    if options.method != "lm" or not damping:
+        return options
+    return dataclasses.replace(options, initial_damping=max(damping[-1], INITIAL_DAMPING))
 
 
 def gnc_tls(
@@ -198,7 +216,11 @@ def _search(graph, mask, width_sq, options, run: Run, start=None):
 
 def _graduated(graph, mask, width_sq, options, run: Run) -> tuple[np.ndarray, Result, float]:
     """GNC's steps 1–3 from the graph's values: (kept edges, their solve, its TLS objective)."""
-    least_squares = dataclasses.replace(options, relative_decrease=STAGE_RELATIVE_DECREASE)
+    least_squares = dataclasses.replace(
+        options,
+        max_iterations=min(options.max_iterations, START_ITERATIONS),
+        relative_decrease=STAGE_RELATIVE_DECREASE,
+    )
     start = run.solve(graph, least_squares, "least squares")
     best, best_objective = None, np.inf
     for restart in starts(graph):
