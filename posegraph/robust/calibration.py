@@ -14,8 +14,11 @@ deleted residuals of the inliers, and the innovations of what a robust solve lef
   times its limit under the median scale.
 A class gets the smaller; in a robust solve that kept gross outliers, the median scale, so that
 the next solve rejects them (and the tail scale then re-admits the true measurements of the
-heavy tail that it rejected too). In least squares the inliers are the measurements that pass
-the test.
+heavy tail that it rejected too). Where that wider width brings gross outliers back, the
+decisions from before it are settled at it, without a new search, and calibration ends: the
+two scales would otherwise alternate (parking-garage: its true loops' tail is heavier than
+the median scale allows). In least squares the inliers are the measurements that pass the
+test.
 
 A robust run at the default width calibrates on its own where it kept gross outliers: false
 loops that an information overstating the noise let the kernel keep (parking-garage's states
@@ -209,23 +212,27 @@ def scale_information(graph: PoseGraph, scales: dict[str, float]) -> None:
 def calibrate(
     graph: PoseGraph,
     first: Result,
-    solve: Callable[[], Result],
+    solve: Callable[[bool, int], Result],
     automatic: bool,
     robust: bool,
     covered: tuple[str, ...] = (),
 ) -> tuple[Result, Calibration | None, list[NoiseClass]]:
     """Calibrates ``graph``'s information from a solve's ``first`` result, re-solving with
-    ``solve`` (from the graph's values, which it sets to the last solution) after each
-    scaling (module docstring). ``robust``: the inliers are what each solve did not reject
-    (its summary's ``rejected_edges`` and ``rejected_priors``), and where some are gross
-    outliers, the median scales apply to reveal them (the next solve rejects them), the tail
-    scales after. ``automatic``: only where the first solve kept gross outliers (else the graph
-    is untouched and the calibration None), every class then scaled alike, by the smallest
-    scale of the classes under the kernel (``covered``).
-    Returns the last result, the calibration, and the noise consistency of the measurements it
-    kept."""
+    ``solve(graduate, start)`` (from the graph's values, which it sets first) after each
+    scaling (module docstring): a robust solve starts from the decisions of solve ``start`` (0
+    the first, then in turn), and without ``graduate`` only settles and searches from them.
+    ``robust``: the inliers are what each solve did not reject (its summary's
+    ``rejected_edges`` and ``rejected_priors``); where some are gross outliers the median
+    scales apply, the tail scales after, and where a scaling that lowered every precision
+    brings gross outliers back (false loops that a new search fitted at the wider width, or a
+    tail heavier than the median scale allows), the decisions before it are settled at it,
+    and calibration ends. ``automatic``: only where the first solve kept gross outliers (else
+    the graph is untouched and the calibration None), every class then scaled alike, by the
+    smallest scale of the classes under the kernel (``covered``). Returns the last result,
+    the calibration, and the noise consistency of the measurements it kept."""
     result, total, solves, classes = first, dict.fromkeys(KINDS, 1.0), 0, []
-    stalled = False  # the last scaling changed no decision: further ones would not either
+    stalled = final = False  # stalled: the last scaling changed no decision, nor would others
+    widened = None  # (index, result) of the solve before a scaling that widened the width
     while True:
         inliers = kept(graph, result) if robust else (None, None)
         checking = automatic and solves == 0  # the gross outliers first; the tail if any
@@ -238,19 +245,23 @@ def calibrate(
         classes = found.classes
         if checking and not found.gross:
             return result, None, classes
-        scales = found.median if robust and found.gross else found.scales()
-        under_kernel = [scales[kind] for kind in covered if kind in scales]
-        if automatic and under_kernel:  # the kernel's width, not the classes' relative weights
-            scales = dict.fromkeys(scales, min(under_kernel))
+        scales = _scaling(found, robust, automatic, covered)
         settled = all(1 / SETTLED <= s <= SETTLED for s in scales.values())
-        if solves == ROUNDS or settled or stalled:
+        if solves == ROUNDS or settled or stalled or final:
             break
+        if robust and widened is not None and found.gross:  # the wider width let them in
+            start, before_widening = widened
+            graph.set_values(before_widening.values, check=False)
+            result, solves, final = solve(False, start), solves + 1, True
+            continue
         scale_information(graph, scales)
         for kind, scale in scales.items():
             total[kind] *= scale
         graph.set_values(result.values, check=False)
         before = kept(graph, result)
-        result, solves = solve(), solves + 1
+        widening = not found.gross and all(scale <= 1.0 for scale in scales.values())
+        widened = (solves, result) if widening else None
+        result, solves = solve(True, solves), solves + 1
         stalled = robust and all(map(np.array_equal, before, kept(graph, result)))
     if automatic and solves == 0:
         return result, None, classes
@@ -258,6 +269,19 @@ def calibrate(
     scales = {k: v for k, v in total.items() if k in present or v != 1.0}
     calibration = Calibration(scales, automatic, solves)
     return result, calibration, classes
+
+
+def _scaling(
+    found: Estimate, robust: bool, automatic: bool, covered: tuple[str, ...]
+) -> dict[str, float]:
+    """The scales to apply after ``found`` (``calibrate``): the median scales where a robust
+    solve kept gross outliers, else the smaller of each class's two; automatic, the smallest
+    of the classes under the kernel for all (the kernel's width, not the classes' weights)."""
+    scales = found.median if robust and found.gross else found.scales()
+    under_kernel = [scales[kind] for kind in covered if kind in scales]
+    if automatic and under_kernel:
+        scales = dict.fromkeys(scales, min(under_kernel))
+    return scales
 
 
 def kept(graph: PoseGraph, result: Result) -> tuple[np.ndarray, np.ndarray]:

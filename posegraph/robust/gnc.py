@@ -147,6 +147,7 @@ def gnc_tls(
     callback: Callback | None = None,
     kept: np.ndarray | None = None,
     start: np.ndarray | None = None,
+    graduate: bool = True,
 ) -> GncOutcome:
     """GNC-TLS over the between edges in ``mask`` (the others are trusted), from the graph's
     values; ``width`` c is the largest inlier residual, in Mahalanobis units: one for every
@@ -165,7 +166,9 @@ def gnc_tls(
     the kept edges are solved for in least squares, and the others are rejected. ``start``,
     decisions that may still hold (an earlier run's, with what was added since kept), replaces
     steps 1–3 if least squares over them settles as it is, and competes with them otherwise
-    (``_settle_decisions``); the local search follows either way."""
+    (``_settle_decisions``); the local search follows either way. Without ``graduate``, steps
+    1–3 never run: ``start`` is settled as in step 3 (``settle_best``) and searched from there,
+    so a width that widened keeps what the decisions rejected far outside it rejected."""
     options = options or SolverOptions()
     search = options
     if options.initial_damping is None:
@@ -179,7 +182,9 @@ def gnc_tls(
             result = run.solve(graph, options, "least squares")
             kept = ~mask | (between_squares(result.values, graph.edges) <= width_sq)
         elif kept is None:
-            kept, searched, from_start = _search(graph, mask, width_sq, search, run, start)
+            kept, searched, from_start = _search(
+                graph, mask, width_sq, search, run, start, graduate
+            )
             work = graph.with_edges(kept)
             work.set_values(searched.values, check=False)
             result = run.solve(work, options, "final")
@@ -195,11 +200,16 @@ def gnc_tls(
     )
 
 
-def _search(graph, mask, width_sq, options, run: Run, start=None):
+def _search(graph, mask, width_sq, options, run: Run, start=None, graduate: bool = True):
     """GNC's steps 1–4 (module docstring); returns (kept edges, the final solve, whether it
     began at ``start``). ``start``, the kept edges of an earlier run extended by what was
     appended since, replaces steps 1–3 where least squares over it settles as it is, and
-    competes with them where it settles only after a change (``_settle_decisions``)."""
+    competes with them where it settles only after a change (``_settle_decisions``); without
+    ``graduate``, it is settled as step 3 settles GNC's decisions, and steps 1–3 never run."""
+    if start is not None and not graduate:
+        settled = settle_best(graph, mask, start, graph.values, width_sq, options, run)
+        kept, result = local_search(graph, mask, *settled, width_sq, options, run)
+        return kept, result, True
     settled, as_given = (
         (None, False)
         if start is None

@@ -65,16 +65,25 @@ def robust_solve(
     warm_solve: WarmSolve,
     standing: np.ndarray | None = None,
     decisions: np.ndarray | None = None,
+    graduate: bool = True,
 ) -> RobustOutcome:
     """A robust solve from the graph's values. ``standing``, GNC's decisions that stand (the
     measurements to keep), skips GNC's search; ``decisions``, the last GNC run's carried to this
-    graph, may start it (``gnc.gnc_tls``). An IRLS kernel over the between edges alone solves
-    through ``warm_solve``."""
+    graph, may start it, and without ``graduate`` only settle and search from there
+    (``gnc.gnc_tls``). An IRLS kernel over the between edges alone solves through
+    ``warm_solve``."""
     work = robust_problem(graph, kernel)
     reused: tuple[str, ...] = ()
     if kernel.spec.gnc:
         outcome = gnc_tls(
-            work, kernel.measured, kernel.widths, options, callback, kept=standing, start=decisions
+            work,
+            kernel.measured,
+            kernel.widths,
+            options,
+            callback,
+            kept=standing,
+            start=decisions,
+            graduate=graduate,
         )
         result, rejected = outcome.result, outcome.rejected
         if outcome.from_start:

@@ -33,6 +33,7 @@ class _Start:
     composed: bool = False
     standing: np.ndarray | None = None
     decisions: np.ndarray | None = None
+    graduate: bool = True
 
 
 class Smoother:
@@ -219,9 +220,8 @@ class Smoother:
         if kernel is None:
             result = self._solve_warm(graph, options, callback)
             return result, np.ones(graph.num_edges), np.ones(len(graph.priors))
-        outcome = robust_solve(
-            graph, kernel, options, callback, self._solve_warm, start.standing, start.decisions
-        )
+        carried = (start.standing, start.decisions, start.graduate)
+        outcome = robust_solve(graph, kernel, options, callback, self._solve_warm, *carried)
         return outcome.result, outcome.edge_weights, outcome.prior_weights
 
     def _calibrate(
@@ -234,7 +234,8 @@ class Smoother:
     ) -> tuple[Result, np.ndarray, np.ndarray]:
         """``calibrate_noise`` (``calibration.calibrate``) after the first solve, where asked or,
         with None, in GNC at the default width; the summary records the noise check and the
-        calibration. A GNC solve after a scaling starts from the decisions before it."""
+        calibration. A GNC solve after a scaling starts from the decisions of the solve that
+        ``calibrate`` names (and only settles them where it says so)."""
         automatic = calibrate_noise is None
         if automatic:
             calibrate_noise = kernel is not None and kernel.spec.gnc and kernel.spec.width is None
@@ -243,11 +244,11 @@ class Smoother:
             return solved
         solves = [solved]
 
-        def again() -> Result:
+        def again(graduate: bool, start: int) -> Result:
             decisions = None
             if kernel is not None and kernel.spec.gnc:
-                decisions = np.concatenate(solves[-1][1:])[: len(kernel.measured)] > 0
-            start = _Start("calibration", decisions=decisions)
+                decisions = np.concatenate(solves[start][1:])[: len(kernel.measured)] > 0
+            start = _Start("calibration", decisions=decisions, graduate=graduate)
             solves.append(self._solve(start, kernel, options, callback))
             return solves[-1][0]
 

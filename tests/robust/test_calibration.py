@@ -3,6 +3,8 @@ mode calibrates where that scaling hid false loops, and only there."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from posegraph_datasets.generators import manhattan_world
@@ -10,6 +12,7 @@ from posegraph_datasets.outliers import add_false_loops, rejection_rates
 
 import posegraph
 from posegraph.graph import odometry_mask
+from posegraph.robust import calibration
 
 
 @pytest.fixture(scope="module")
@@ -78,3 +81,43 @@ def test_robust_mode_leaves_information_that_hides_nothing(simulated):
     assert [c["kind"] for c in result.summary.noise] == ["odometry", "loop closures"]
     for noise_class in result.summary.noise:
         assert noise_class["chi2_per_dof"] == pytest.approx(1.0, abs=0.15)
+
+
+def test_calibration_settles_the_decisions_before_a_widening_that_brings_gross_outliers_back(
+    monkeypatch,
+):
+    """The control flow of ``calibrate`` on parking-garage's pattern (estimates scripted): gross
+    outliers kept, so the median scale narrows the width; none left, so the tail scale widens
+    it; gross outliers back at the wider width. Instead of narrowing again, the decisions of
+    the solve before the widening are settled at the wider width (``graduate`` False) and the
+    calibration ends: the median scale of the last estimate is never applied."""
+    graph, _ = manhattan_world(num_poses=30, seed=3)
+    first = posegraph.optimize(graph.copy())
+
+    def estimated(median: float, tail: float, gross: int) -> calibration.Estimate:
+        kind = "loop closures"
+        return calibration.Estimate({kind: median}, {kind: tail}, [], gross)
+
+    script = iter(
+        [
+            estimated(100.0, 200.0, 5),  # the check, then the estimate with what was left out
+            estimated(100.0, 200.0, 5),
+            estimated(1.0, 0.1, 0),
+            estimated(8.0, 0.9, 3),
+            estimated(8.0, 0.9, 3),
+        ]
+    )
+    monkeypatch.setattr(calibration, "estimate", lambda *args, **kwargs: next(script))
+    calls = []
+
+    def solve(graduate: bool, start: int):
+        calls.append((graduate, start))
+        summary = dataclasses.replace(first.summary, rejected_edges=[len(calls)])
+        return dataclasses.replace(first, summary=summary)
+
+    _, found, _ = calibration.calibrate(
+        graph, first, solve, automatic=True, robust=True, covered=("loop closures",)
+    )
+    assert calls == [(True, 0), (True, 1), (False, 1)]
+    assert found.scales == {"loop closures": pytest.approx(10.0)}
+    assert found.solves == 3
