@@ -133,10 +133,10 @@ def _continued(options: SolverOptions, result: Result) -> SolverOptions:
     a warm stage goes on from the last one's solution, where a λ small enough for its start
     proposes steps that the less convex surrogate rejects, more than a stage's few iterations
     can raise it past. Other methods' options stand."""
-    damping = [record.damping for record in result.summary.iterations if record.damping > 0]
-    if options.method != "lm" or not damping:
+    records = result.summary.iterations
+    if options.method != "lm" or not records:
         return options
-    return dataclasses.replace(options, initial_damping=max(damping[-1], INITIAL_DAMPING))
+    return dataclasses.replace(options, initial_damping=max(records[-1].damping, INITIAL_DAMPING))
 
 
 def gnc_tls(

@@ -244,10 +244,10 @@ class Smoother:
             return solved
         solves = [solved]
 
-        def again(graduate: bool, start: int) -> Result:
+        def again(graduate: bool, earlier: int) -> Result:
             decisions = None
             if kernel is not None and kernel.spec.gnc:
-                decisions = np.concatenate(solves[start][1:])[: len(kernel.measured)] > 0
+                decisions = np.concatenate(solves[earlier][1:])[: len(kernel.measured)] > 0
             start = _Start("calibration", decisions=decisions, graduate=graduate)
             solves.append(self._solve(start, kernel, options, callback))
             return solves[-1][0]

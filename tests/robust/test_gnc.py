@@ -12,7 +12,6 @@ from posegraph_datasets.outliers import add_false_loops, rejection_rates, withou
 import posegraph
 from posegraph.graph import PoseGraph
 from posegraph.init.choice import initialize
-from posegraph.io import load_graph
 from posegraph.io.trajectories import Trajectory
 from posegraph.lie import SE2
 from posegraph.problem.factors import (
@@ -112,7 +111,7 @@ def test_gnc_warm_stages_go_on_at_the_damping_the_last_one_left(shared_dataset):
     every step of their few iterations on intel with false loops (λ reached 3e-6 where they
     needed 1e-5), and the warm sequence never left least squares' solution. Stopped after six
     warm stages."""
-    graph = load_graph(str(shared_dataset("intel.g2o"))).graph
+    graph = posegraph.read_graph(str(shared_dataset("intel.g2o"))).graph
     corrupted, _ = add_false_loops(graph, 0.1, seed=0)
     result = posegraph.optimize(
         corrupted, robust="gnc", callback=lambda record: record.stage == "gnc round 7 (warm)"
