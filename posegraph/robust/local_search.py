@@ -20,6 +20,11 @@ EXPLAINED = 0.75
 """Re-admission: the share of a rejected loop's s that the other re-admitted loops must remove.
 The others explain none of a lone false loop's s at first order, but some through the
 nonlinearity, so the share is well above one half."""
+NEAR = 2.0
+"""Re-admission: a candidate whose s at the solution is at most this many times its width c²
+needs no other loop to explain it. Loops just outside the width (a pair of true loops each
+1.27 c² away, each pulling the other in by 12%) may only fit together; a loop this close
+bends the solution little even if it is false."""
 
 
 def local_search(graph, mask, kept, result, objective, width_sq, options, run: Run):
@@ -89,8 +94,10 @@ def _readmit(graph, mask, kept, result, objective, width_sq, options, leverage, 
         squares = deleted_residuals(
             work, values, edges=position[candidates], linear_solver=options.linear_solver
         ).squares
-        explained = (squares <= width_sq[candidates]) | (
-            squares <= (1.0 - EXPLAINED) * misfit[candidates]
+        explained = (
+            (squares <= width_sq[candidates])
+            | (squares <= (1.0 - EXPLAINED) * misfit[candidates])
+            | (misfit[candidates] <= NEAR * width_sq[candidates])
         )
         if explained.all():
             return settle_best(graph, mask, with_candidates, values, width_sq, options, run)

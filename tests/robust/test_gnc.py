@@ -7,7 +7,12 @@ import pytest
 import scipy.stats as scipy_stats
 from posegraph_datasets.generators import manhattan_world, resimulate
 from posegraph_datasets.monocular import monocular_sequence
-from posegraph_datasets.outliers import add_false_loops, rejection_rates, without_priors
+from posegraph_datasets.outliers import (
+    add_false_loops,
+    add_false_loops_anywhere,
+    rejection_rates,
+    without_priors,
+)
 
 import posegraph
 from posegraph.graph import PoseGraph
@@ -274,6 +279,44 @@ def test_gnc_readmission_leaves_out_a_lone_false_loop_that_would_fit(shared_data
     # Calibration would catch it (intel's information overstates its noise): leave it out.
     unchecked = posegraph.optimize(corrupted.copy(), robust="gnc", calibrate_noise=False)
     assert rejection_rates(corrupted, false, unchecked.summary.rejected_edges)[0] < 1.0
+
+
+def test_gnc_readmits_true_loops_just_outside_the_width_that_fit_only_together(
+    shared_dataset, monkeypatch
+):
+    """intel with 10% false loops of the ``anywhere`` generator (seed 0), its information ×10
+    (about what calibration estimates there): with every false loop and the true loops 2394 and
+    2396 rejected, each of the two lies 1.2–1.4 c² from the solution, and each pulls the other in
+    by about 12% only, so neither counts as explained. They are re-admitted as near-inliers
+    (``NEAR``); without that rule they stay out, as robust mode left them before it."""
+    graph = posegraph.read_graph(str(shared_dataset("intel.g2o"))).graph
+    corrupted, false = add_false_loops_anywhere(graph, 0.1, seed=0)
+    corrupted.edges = corrupted.edges.weighted(np.full(corrupted.num_edges, 10.0))
+    mask = robust_mask(corrupted, "loops")
+    width_sq = np.full(corrupted.num_edges, default_width(3, gnc_quantile(int(mask.sum()))) ** 2)
+    pair = np.array([2394, 2396])
+    kept = ~false
+    kept[pair] = False
+    options = posegraph.SolverOptions(initial_damping=tls.INITIAL_DAMPING)
+    result = posegraph.optimize(corrupted.with_edges(kept), options=options)
+    misfit = between_squares(result.values, corrupted.edges.subset(pair)) / width_sq[pair]
+    assert np.all((misfit > 1.0) & (misfit < local_search.NEAR))
+
+    def readmitted():
+        objective = tls.tls_objective(corrupted, result.values, mask, width_sq)
+        leverage = local_search._leverage(corrupted, kept, result, options)
+        run = tls.Run(None, options)
+        found, _, lowered = local_search._readmit(
+            corrupted, mask, kept, result, objective, width_sq, options, leverage, run
+        )
+        return found, lowered < objective
+
+    found, lowered = readmitted()
+    assert found[pair].all() and lowered
+    assert not found[false].any()
+    monkeypatch.setattr(local_search, "NEAR", 0.0)
+    found, lowered = readmitted()
+    assert not found[pair].any() and not lowered
 
 
 def test_gnc_keeps_a_false_loop_that_the_map_fits_more_cheaply_than_its_rejection(shared_dataset):
