@@ -15,10 +15,15 @@ deleted residuals of the inliers, and the innovations of what a robust solve lef
 A class gets the smaller; in a robust solve that kept gross outliers, the median scale, so that
 the next solve rejects them (and the tail scale then re-admits the true measurements of the
 heavy tail that it rejected too). Where that wider width brings gross outliers back, the
-decisions from before it are settled at it, without a new search, and calibration ends: the
-two scales would otherwise alternate (parking-garage: its true loops' tail is heavier than
-the median scale allows). In least squares the inliers are the measurements that pass the
-test.
+decisions from before it are settled at it, and calibration ends: the two scales would
+otherwise alternate (parking-garage: its true loops' tail is heavier than the median scale
+allows). In least squares the inliers are the measurements that pass the test.
+
+A robust solve after a scaling does not graduate again: it settles the last decisions at the
+new width (GNC's consistency pass) and searches locally from them. Scaling every class alike
+leaves the least-squares solution over a kept set where it was and moves only the width
+relative to the residuals, which the consistency pass and the local search's re-admission
+and dropping follow.
 
 A robust run at the default width calibrates on its own where it kept gross outliers: false
 loops that an information overstating the noise let the kernel keep (parking-garage's states
@@ -212,20 +217,20 @@ def scale_information(graph: PoseGraph, scales: dict[str, float]) -> None:
 def calibrate(
     graph: PoseGraph,
     first: Result,
-    solve: Callable[[bool, int], Result],
+    solve: Callable[[int], Result],
     automatic: bool,
     robust: bool,
     covered: tuple[str, ...] = (),
 ) -> tuple[Result, Calibration | None, list[NoiseClass]]:
     """Calibrates ``graph``'s information from a solve's ``first`` result, re-solving with
-    ``solve(graduate, start)`` (from the graph's values, which it sets first) after each
-    scaling (module docstring): a robust solve starts from the decisions of solve ``start`` (0
-    the first, then in turn), and without ``graduate`` only settles and searches from them.
+    ``solve(start)`` (from the graph's values, which it sets first) after each scaling (module
+    docstring): a robust solve settles the decisions of solve ``start`` (0 the first, then in
+    turn) and searches from them.
     ``robust``: the inliers are what each solve did not reject (its summary's
     ``rejected_edges`` and ``rejected_priors``); where some are gross outliers the median
     scales apply, the tail scales after, and where a scaling that lowered every precision
-    brings gross outliers back (false loops that a new search fitted at the wider width, or a
-    tail heavier than the median scale allows), the decisions before it are settled at it,
+    brings gross outliers back (false loops that the search re-admitted at the wider width, or
+    a tail heavier than the median scale allows), the decisions before it are settled at it,
     and calibration ends. ``automatic``: only where the first solve kept gross outliers (else
     the graph is untouched and the calibration None), every class then scaled alike, by the
     smallest scale of the classes under the kernel (``covered``). Returns the last result,
@@ -252,7 +257,7 @@ def calibrate(
         if robust and widened is not None and found.gross:  # the wider width let them in
             start, before_widening = widened
             graph.set_values(before_widening.values, check=False)
-            result, solves, final = solve(False, start), solves + 1, True
+            result, solves, final = solve(start), solves + 1, True
             continue
         scale_information(graph, scales)
         for kind, scale in scales.items():
@@ -261,7 +266,7 @@ def calibrate(
         before = kept(graph, result)
         widening = not found.gross and all(scale <= 1.0 for scale in scales.values())
         widened = (solves, result) if widening else None
-        result, solves = solve(True, solves), solves + 1
+        result, solves = solve(solves), solves + 1
         stalled = robust and all(map(np.array_equal, before, kept(graph, result)))
     if automatic and solves == 0:
         return result, None, classes

@@ -4,6 +4,7 @@ mode calibrates where that scaling hid false loops, and only there."""
 from __future__ import annotations
 
 import dataclasses
+import itertools
 
 import numpy as np
 import pytest
@@ -55,7 +56,8 @@ def test_calibration_restores_each_class_s_information(simulated):
 
 def test_robust_mode_calibrates_where_the_information_hides_false_loops(simulated):
     """With the information stating 100× the noise, GNC's default width keeps false loops;
-    robust mode finds that, scales the information, and rejects them."""
+    robust mode finds that, scales the information, and rejects them. The solves after a
+    scaling settle the decisions and search locally from them: GNC graduates once."""
     graph, _ = simulated
     corrupted, false = add_false_loops(_scaled(graph, 1e-2, 1e-2), 0.3, seed=0)
     left = posegraph.optimize(corrupted.copy(), robust="gnc", calibrate_noise=False)
@@ -69,6 +71,9 @@ def test_robust_mode_calibrates_where_the_information_hides_false_loops(simulate
     calibration = result.summary.calibration
     assert calibration["automatic"] is True
     assert all(50 < scale < 200 for scale in calibration["scales"].values())
+    assert calibration["solves"] == 2
+    stages = [stage for stage, _ in itertools.groupby(r.stage for r in result.summary.iterations)]
+    assert stages.count("gnc round 1 (warm)") == 1
 
 
 def test_robust_mode_leaves_information_that_hides_nothing(simulated):
@@ -89,8 +94,8 @@ def test_calibration_settles_the_decisions_before_a_widening_that_brings_gross_o
     """The control flow of ``calibrate`` on parking-garage's pattern (estimates scripted): gross
     outliers kept, so the median scale narrows the width; none left, so the tail scale widens
     it; gross outliers back at the wider width. Instead of narrowing again, the decisions of
-    the solve before the widening are settled at the wider width (``graduate`` False) and the
-    calibration ends: the median scale of the last estimate is never applied."""
+    the solve before the widening are settled at the wider width and the calibration ends: the
+    median scale of the last estimate is never applied."""
     graph, _ = manhattan_world(num_poses=30, seed=3)
     first = posegraph.optimize(graph.copy())
 
@@ -110,14 +115,14 @@ def test_calibration_settles_the_decisions_before_a_widening_that_brings_gross_o
     monkeypatch.setattr(calibration, "estimate", lambda *args, **kwargs: next(script))
     calls = []
 
-    def solve(graduate: bool, start: int):
-        calls.append((graduate, start))
+    def solve(start: int):
+        calls.append(start)
         summary = dataclasses.replace(first.summary, rejected_edges=[len(calls)])
         return dataclasses.replace(first, summary=summary)
 
     _, found, _ = calibration.calibrate(
         graph, first, solve, automatic=True, robust=True, covered=("loop closures",)
     )
-    assert calls == [(True, 0), (True, 1), (False, 1)]
+    assert calls == [0, 1, 1]
     assert found.scales == {"loop closures": pytest.approx(10.0)}
     assert found.solves == 3
