@@ -14,8 +14,8 @@ deleted residuals of the inliers, and the innovations of what a robust solve lef
   times its limit under the median scale.
 A class gets the smaller; in a robust solve that kept gross outliers, the median scale, so that
 the next solve rejects them (and the tail scale then re-admits the true measurements of the
-heavy tail that it rejected too). Where that wider width brings gross outliers back, the
-decisions from before it are settled at it, and calibration ends: the two scales would
+heavy tail that it rejected too). Where that wider width brings gross outliers back,
+calibration ends there, with the decisions from before it settled at it: the two scales would
 otherwise alternate (parking-garage: its true loops' tail is heavier than the median scale
 allows). In least squares the inliers are the measurements that pass the test.
 
@@ -217,27 +217,27 @@ def scale_information(graph: PoseGraph, scales: dict[str, float]) -> None:
 def calibrate(
     graph: PoseGraph,
     first: Result,
-    solve: Callable[[int], Result],
+    solve: Callable[[], Result],
     automatic: bool,
     robust: bool,
     covered: tuple[str, ...] = (),
 ) -> tuple[Result, Calibration | None, list[NoiseClass]]:
     """Calibrates ``graph``'s information from a solve's ``first`` result, re-solving with
-    ``solve(start)`` (from the graph's values, which it sets first) after each scaling (module
-    docstring): a robust solve settles the decisions of solve ``start`` (0 the first, then in
-    turn) and searches from them.
+    ``solve()`` (from the graph's values, which it sets to the last solution first) after each
+    scaling (module docstring): a robust solve settles the last solve's decisions at the new
+    width and searches from them.
     ``robust``: the inliers are what each solve did not reject (its summary's
     ``rejected_edges`` and ``rejected_priors``); where some are gross outliers the median
     scales apply, the tail scales after, and where a scaling that lowered every precision
     brings gross outliers back (false loops that the search re-admitted at the wider width, or
-    a tail heavier than the median scale allows), the decisions before it are settled at it,
-    and calibration ends. ``automatic``: only where the first solve kept gross outliers (else
+    a tail heavier than the median scale allows), calibration ends there, with the decisions
+    from before it settled at the wider width. ``automatic``: only where the first solve kept gross outliers (else
     the graph is untouched and the calibration None), every class then scaled alike, by the
     smallest scale of the classes under the kernel (``covered``). Returns the last result,
     the calibration, and the noise consistency of the measurements it kept."""
     result, total, solves, classes = first, dict.fromkeys(KINDS, 1.0), 0, []
-    stalled = final = False  # stalled: the last scaling changed no decision, nor would others
-    widened = None  # (index, result) of the solve before a scaling that widened the width
+    stalled = False  # the last scaling changed no decision, nor would others
+    widened = False  # the last scaling lowered every precision
     while True:
         inliers = kept(graph, result) if robust else (None, None)
         checking = automatic and solves == 0  # the gross outliers first; the tail if any
@@ -252,21 +252,15 @@ def calibrate(
             return result, None, classes
         scales = _scaling(found, robust, automatic, covered)
         settled = all(1 / SETTLED <= s <= SETTLED for s in scales.values())
-        if solves == ROUNDS or settled or stalled or final:
+        if solves == ROUNDS or settled or stalled or (robust and widened and found.gross):
             break
-        if robust and widened is not None and found.gross:  # the wider width let them in
-            start, before_widening = widened
-            graph.set_values(before_widening.values, check=False)
-            result, solves, final = solve(start), solves + 1, True
-            continue
         scale_information(graph, scales)
         for kind, scale in scales.items():
             total[kind] *= scale
         graph.set_values(result.values, check=False)
         before = kept(graph, result)
-        widening = not found.gross and all(scale <= 1.0 for scale in scales.values())
-        widened = (solves, result) if widening else None
-        result, solves = solve(solves), solves + 1
+        widened = not found.gross and all(scale <= 1.0 for scale in scales.values())
+        result, solves = solve(), solves + 1
         stalled = robust and all(map(np.array_equal, before, kept(graph, result)))
     if automatic and solves == 0:
         return result, None, classes

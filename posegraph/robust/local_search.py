@@ -22,9 +22,9 @@ The others explain none of a lone false loop's s at first order, but some throug
 nonlinearity, so the share is well above one half."""
 NEAR = 2.0
 """Re-admission: a candidate whose s at the solution is at most this many times its width c²
-needs no other loop to explain it. Loops just outside the width (a pair of true loops each
-1.27 c² away, each pulling the other in by 12%) may only fit together; a loop this close
-bends the solution little even if it is false."""
+needs no other loop to explain it. Loops just outside the width may fit only together, each
+pulling the other in too little to count as explained; a loop this close bends the solution
+little even if it is false (``docs/architecture.md``)."""
 
 
 def local_search(graph, mask, kept, result, objective, width_sq, options, run: Run):
@@ -67,9 +67,9 @@ def _readmit(graph, mask, kept, result, objective, width_sq, options, leverage, 
     poorly constrained poses, by chance. Loops that only together would lower it are candidates
     too (``_jointly_consistent``). The candidates are solved for together, and a candidate stays
     one only if the others explain it: its s at the joint solution fitted without it (its exact
-    deleted residual) is at most c², or at most ``1 − EXPLAINED`` of its s before. This repeats
-    over the remaining candidates until all are explained, then the kept set with them is
-    settled. The loops of a drifted region pull it back for each other; a lone false loop is
+    deleted residual) is at most c², or at most ``1 − EXPLAINED`` of its s before, or its s
+    before is within ``NEAR`` c². This repeats over the remaining candidates until all are
+    explained, then the kept set with them is settled. The loops of a drifted region pull it back for each other; a lone false loop is
     consistent only with the solution bent to fit it, and without it, its misfit is what it was.
     Returns (kept, result or None, its TLS objective)."""
     rejected = np.flatnonzero(mask & ~kept)

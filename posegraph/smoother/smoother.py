@@ -234,8 +234,8 @@ class Smoother:
     ) -> tuple[Result, np.ndarray, np.ndarray]:
         """``calibrate_noise`` (``calibration.calibrate``) after the first solve, where asked or,
         with None, in GNC at the default width; the summary records the noise check and the
-        calibration. A GNC solve after a scaling settles the decisions of the solve that
-        ``calibrate`` names and searches locally from them, without graduating again."""
+        calibration. A GNC solve after a scaling settles the last solve's decisions and searches
+        locally from them, without graduating again."""
         automatic = calibrate_noise is None
         if automatic:
             calibrate_noise = kernel is not None and kernel.spec.gnc and kernel.spec.width is None
@@ -244,10 +244,10 @@ class Smoother:
             return solved
         solves = [solved]
 
-        def again(earlier: int) -> Result:
+        def again() -> Result:
             decisions = None
             if kernel is not None and kernel.spec.gnc:
-                decisions = np.concatenate(solves[earlier][1:])[: len(kernel.measured)] > 0
+                decisions = np.concatenate(solves[-1][1:])[: len(kernel.measured)] > 0
             start = _Start("calibration", decisions=decisions, graduate=False)
             solves.append(self._solve(start, kernel, options, callback))
             return solves[-1][0]
