@@ -231,10 +231,10 @@ def calibrate(
     scales apply, the tail scales after, and where a scaling that lowered every precision
     brings gross outliers back (false loops that the search re-admitted at the wider width, or
     a tail heavier than the median scale allows), calibration ends there, with the decisions
-    from before it settled at the wider width. ``automatic``: only where the first solve kept gross outliers (else
-    the graph is untouched and the calibration None), every class then scaled alike, by the
-    smallest scale of the classes under the kernel (``covered``). Returns the last result,
-    the calibration, and the noise consistency of the measurements it kept."""
+    from before it settled at the wider width. ``automatic``: only where the first solve kept
+    gross outliers (else the graph is untouched and the calibration None), every class then
+    scaled alike, by the smallest scale of the classes under the kernel (``covered``). Returns
+    the last result, the calibration, and the noise consistency of the measurements it kept."""
     result, total, solves, classes = first, dict.fromkeys(KINDS, 1.0), 0, []
     stalled = False  # the last scaling changed no decision, nor would others
     widened = False  # the last scaling lowered every precision

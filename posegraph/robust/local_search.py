@@ -69,8 +69,9 @@ def _readmit(graph, mask, kept, result, objective, width_sq, options, leverage, 
     one only if the others explain it: its s at the joint solution fitted without it (its exact
     deleted residual) is at most c², or at most ``1 − EXPLAINED`` of its s before, or its s
     before is within ``NEAR`` c². This repeats over the remaining candidates until all are
-    explained, then the kept set with them is settled. The loops of a drifted region pull it back for each other; a lone false loop is
-    consistent only with the solution bent to fit it, and without it, its misfit is what it was.
+    explained, then the kept set with them is settled. The loops of a drifted region pull it
+    back for each other; a lone false loop is consistent only with the solution bent to fit
+    it, and without it, its misfit is what it was.
     Returns (kept, result or None, its TLS objective)."""
     rejected = np.flatnonzero(mask & ~kept)
     if rejected.size == 0:
