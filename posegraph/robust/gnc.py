@@ -168,7 +168,7 @@ def gnc_tls(
     steps 1–3 if least squares over them settles as it is, and competes with them otherwise
     (``_settle_decisions``); the local search follows either way. Without ``graduate``, steps
     1–3 never run: ``start`` is settled as in step 3 (``settle_best``) and searched from there,
-    so a width that widened keeps what the decisions rejected far outside it rejected."""
+    as calibration's re-solves after a scaling do (``robust.calibration``)."""
     options = options or SolverOptions()
     search = options
     if options.initial_damping is None:
