@@ -111,6 +111,7 @@ SUMMARY = {
                 "scales": {"type": "object", "additionalProperties": _NUMBER},
                 "automatic": {"type": "boolean"},
                 "solves": {"type": "integer", "minimum": 0},
+                "second_opinion": {"type": "boolean"},
             },
         },
         "history": {

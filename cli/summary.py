@@ -77,11 +77,14 @@ def _noise_lines(summary: Summary) -> list[str]:
     calibration = summary.calibration
     if calibration is not None:
         scales = ", ".join(f"{kind} ×{scale:.3g}" for kind, scale in calibration["scales"].items())
-        why = (
-            "GNC kept gross outliers under the noise the residuals show"
-            if calibration["automatic"]
-            else "--calibrate-noise"
-        )
+        why = "--calibrate-noise"
+        if calibration.get("second_opinion"):
+            why = (
+                "GNC's solution fit the median loop closure worse than its start; GNC at a"
+                " tenth of the width fit it better"
+            )
+        elif calibration["automatic"]:
+            why = "GNC kept gross outliers under the noise the residuals show"
         lines.append(
             f"  calibrated      information {scales} ({why}; {_solves(calibration['solves'])})"
         )

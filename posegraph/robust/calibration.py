@@ -27,7 +27,8 @@ and dropping follow.
 
 A robust run at the default width calibrates on its own where it kept gross outliers: false
 loops that an information overstating the noise let the kernel keep (parking-garage's states
-20,000× its noise). It scales every class alike, by the smallest scale of the classes under the
+20,000× its noise); and where a second opinion at a narrower width replaced a solution that
+kept none but was wrong (``robust.second_opinion``). It scales every class alike, by the smallest scale of the classes under the
 kernel (the loop closures, by default; odometry that false loops bent says little): what it
 corrects is the kernel's width relative to the noise, and the classes' relative weights, and
 with them the least-squares solution over a set of inliers, stay the file's."""
@@ -76,11 +77,13 @@ measures) say nothing of the noise: their deleted residual is r̃ᵀ(I − M)⁻
 @dataclasses.dataclass(frozen=True)
 class Calibration:
     """What calibration did: the factor each class's information was multiplied by, whether it
-    ran on its own (``automatic``), and the solves it took after the first."""
+    ran on its own (``automatic``), the solves it took after the first, and whether it began
+    at a second opinion's narrower width (``robust.second_opinion``)."""
 
     scales: dict[str, float]
     automatic: bool
     solves: int
+    second_opinion: bool = False
 
     def as_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -221,6 +224,7 @@ def calibrate(
     automatic: bool,
     robust: bool,
     covered: tuple[str, ...] = (),
+    second: Callable[[Result], tuple[Result, float] | None] | None = None,
 ) -> tuple[Result, Calibration | None, list[NoiseClass]]:
     """Calibrates ``graph``'s information from a solve's ``first`` result, re-solving with
     ``solve()`` (from the graph's values, which it sets to the last solution first) after each
@@ -232,10 +236,12 @@ def calibrate(
     brings gross outliers back (false loops that the search re-admitted at the wider width, or
     a tail heavier than the median scale allows), calibration ends there, with the decisions
     from before it settled at the wider width. ``automatic``: only where the first solve kept
-    gross outliers (else the graph is untouched and the calibration None), every class then
-    scaled alike, by the smallest scale of the classes under the kernel (``covered``). Returns
-    the last result, the calibration, and the noise consistency of the measurements it kept."""
-    result, total, solves, classes = first, dict.fromkeys(KINDS, 1.0), 0, []
+    gross outliers or ``second(first)`` replaces it (``robust.second_opinion``: a narrower
+    width's result, and its precision factor; else the graph is untouched and the calibration
+    None), every class scaled alike, by the smallest scale of the classes under the kernel
+    (``covered``). Returns the last result, the calibration, and the noise consistency of the
+    measurements it kept."""
+    result, total, solves, classes, narrower = first, dict.fromkeys(KINDS, 1.0), 0, [], None
     stalled = False  # the last scaling changed no decision, nor would others
     widened = False  # the last scaling lowered every precision
     while True:
@@ -249,14 +255,17 @@ def calibrate(
             break
         classes = found.classes
         if checking and not found.gross:
-            return result, None, classes
+            if second is None or (narrower := second(result)) is None:
+                return result, None, classes
+            (result, factor), solves = narrower, 1
+            total.update((KINDS[kind], factor) for kind in np.unique(measurement_kinds(graph)))
+            continue
         scales = _scaling(found, robust, automatic, covered)
         settled = all(1 / SETTLED <= s <= SETTLED for s in scales.values())
         if solves == ROUNDS or settled or stalled or (robust and widened and found.gross):
             break
         scale_information(graph, scales)
-        for kind, scale in scales.items():
-            total[kind] *= scale
+        total.update((kind, total[kind] * scale) for kind, scale in scales.items())
         graph.set_values(result.values, check=False)
         before = kept(graph, result)
         widened = not found.gross and all(scale <= 1.0 for scale in scales.values())
@@ -266,7 +275,7 @@ def calibrate(
         return result, None, classes
     present = {c.kind for c in classes}
     scales = {k: v for k, v in total.items() if k in present or v != 1.0}
-    calibration = Calibration(scales, automatic, solves)
+    calibration = Calibration(scales, automatic, solves, second_opinion=narrower is not None)
     return result, calibration, classes
 
 

@@ -5,6 +5,7 @@ normal equations with their sparsity pattern, symbolic factorisation and lineari
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 
 import numpy as np
@@ -15,9 +16,10 @@ from ..problem.linear import NormalEquations
 from ..robust.calibration import calibrate, kernel_classes
 from ..robust.kernels import Robustifier
 from ..robust.run import cost, robust_solve, with_robust_record
+from ..robust.second_opinion import second_opinion
 from ..robust.spec import Kernel, RobustSpec, resolve
 from ..solvers import STOPPED, TIME_LIMIT, Callback, Result, SolverOptions, solve
-from ..solvers.summary import in_turn
+from ..solvers.summary import in_turn_summary
 from . import warm_start
 from .fixed_lag import FixedLag
 from .solution import GncProblem, Solution
@@ -242,35 +244,34 @@ class Smoother:
         stopped = solved[0].summary.termination in (STOPPED, TIME_LIMIT)
         if not calibrate_noise or stopped or options.max_iterations == 0:
             return solved
-        solves = [solved]
+        solves, start_values = [solved], self.graph.values[np.arange(self.graph.num_nodes)]
 
-        def again() -> Result:
+        def again(graduate: bool = False) -> Result:  # graduate: GNC anew, a second opinion
             decisions = None
-            if kernel is not None and kernel.spec.gnc:
+            if kernel is not None and kernel.spec.gnc and not graduate:
                 decisions = np.concatenate(solves[-1][1:])[: len(kernel.measured)] > 0
-            start = _Start("calibration", decisions=decisions, graduate=False)
+            start = _Start("calibration", decisions=decisions, graduate=graduate)
             solves.append(self._solve(start, kernel, options, callback))
             return solves[-1][0]
 
         began = time.perf_counter()
         covered = () if kernel is None else kernel_classes(self.graph, kernel.measured)
+        second = None
+        if automatic and kernel is not None:  # GNC at the default width
+            fresh = functools.partial(again, True)
+            second = functools.partial(second_opinion, self.graph, kernel, start_values, fresh)
         result, calibration, noise = calibrate(
-            self.graph, solved[0], again, automatic, kernel is not None, covered
+            self.graph, solved[0], again, automatic, kernel is not None, covered, second
         )
         summaries = [s[0].summary for s in solves]
-        phases = {
-            name: sum(summary.phase_times.get(name, 0.0) for summary in summaries)
-            for name in summaries[0].phase_times
-        }
-        checking = time.perf_counter() - began - sum(s.total_time for s in summaries[1:])
+        elapsed = time.perf_counter() - began
         summary = dataclasses.replace(
-            result.summary,
-            iterations=in_turn(summaries),
-            phase_times={**phases, "noise check": checking},
+            in_turn_summary(result.summary, summaries, "noise check", elapsed),
             noise=[c.as_dict() for c in noise],
             calibration=None if calibration is None else calibration.as_dict(),
         )
-        return dataclasses.replace(result, summary=summary), *solves[-1][1:]
+        weights = next(solve[1:] for solve in solves if solve[0] is result)
+        return dataclasses.replace(result, summary=summary), *weights
 
     def _solve_warm(
         self,

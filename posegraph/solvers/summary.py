@@ -146,3 +146,19 @@ def in_turn(summaries: list[Summary]) -> list[IterationRecord]:
             )
         offset += summary.total_time
     return records
+
+
+def in_turn_summary(
+    summary: Summary, summaries: list[Summary], work: str, seconds: float
+) -> Summary:
+    """``summary`` (of one of ``summaries``, solves made one after another, the first before
+    the ``seconds`` that the others took part of) with all their iterations (``in_turn``) and
+    phase times, and the rest of the ``seconds`` as the phase ``work``."""
+    phases = {
+        name: sum(each.phase_times.get(name, 0.0) for each in summaries)
+        for name in summaries[0].phase_times
+    }
+    rest = seconds - sum(each.total_time for each in summaries[1:])
+    return dataclasses.replace(
+        summary, iterations=in_turn(summaries), phase_times={**phases, work: rest}
+    )

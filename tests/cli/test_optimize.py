@@ -488,3 +488,25 @@ def test_calibrate_noise_reports_the_scales_and_writes_the_scaled_information(tm
     assert factor == pytest.approx(calibration["scales"]["odometry"], rel=1e-6)
     text = run("optimize", path, "--calibrate-noise").stdout
     assert re.search(r"calibrated +information odometry ×\d+", text)
+
+
+def test_the_summary_says_why_robust_mode_calibrated():
+    """Automatic calibration names its reason: gross outliers kept, or a second opinion at a
+    narrower width (``robust.second_opinion``) taken."""
+    import dataclasses
+
+    from posegraph_cli.summary import _noise_lines
+    from posegraph_datasets.generators import manhattan_world
+
+    import posegraph
+
+    graph, _ = manhattan_world(30, seed=4)
+    summary = posegraph.optimize(graph, robust="gnc").summary
+    assert summary.noise and summary.calibration is None
+    for second, reason in [(False, "GNC kept gross outliers"), (True, "a tenth of the width")]:
+        calibration = {"scales": {"odometry": 400.0}, "automatic": True, "solves": 3}
+        calibrated = dataclasses.replace(
+            summary, calibration={**calibration, "second_opinion": second}
+        )
+        (line,) = [line for line in _noise_lines(calibrated) if "calibrated" in line]
+        assert reason in line and "odometry ×400" in line

@@ -1,0 +1,119 @@
+"""The second opinion at a narrower width: asked only where GNC's solution fits the median loop
+closure worse than its start did, taken only where its TLS objective at the file's information
+is lower, and the graph's information left as it was otherwise."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from posegraph_datasets.generators import manhattan_world
+
+import posegraph
+from posegraph.init.choice import initialize
+from posegraph.robust import calibration, second_opinion
+from posegraph.robust.spec import RobustSpec, resolve
+
+
+@pytest.fixture(scope="module")
+def problem():
+    """A manhattan world, GNC's kernel on it, its odometry start and least-squares solution,
+    and a solution bent away from both (every pose turned a little more than the last)."""
+    graph, _ = manhattan_world(num_poses=300, seed=5)
+    kernel = resolve(RobustSpec.parse("gnc", "loops", False), graph)
+    start = initialize(graph, "odometry")
+    solved = posegraph.optimize(graph.copy())
+    return graph, kernel, start, solved, _turned(solved, 0.002)
+
+
+def _turned(result, radians: float):
+    """``result`` with each pose turned by ``radians`` more than the one before."""
+    twist = np.zeros((len(result.values), 3))
+    twist[:, 2] = radians * np.arange(len(twist))
+    values = result.values.compose(type(result.values).exp(twist))
+    return dataclasses.replace(result, values=values)
+
+
+def _narrower_run(graph, values, seen):
+    """A scripted second opinion ending at ``values``; it records the information and the
+    values it starts from."""
+
+    def solve():
+        seen.append((graph.edges.information, graph.values))
+        return values
+
+    return solve
+
+
+def test_a_solution_that_fits_the_median_loop_worse_than_its_start_asks_for_it(problem):
+    graph, kernel, start, solved, bent = problem
+    measured = kernel.measured[: graph.num_edges]
+    assert second_opinion.fits_median_worse(graph, measured, start, bent.values)
+    assert not second_opinion.fits_median_worse(graph, measured, start, solved.values)
+    assert not second_opinion.fits_median_worse(graph, np.zeros_like(measured), start, bent.values)
+
+
+def test_the_narrower_run_replaces_a_worse_solution_and_keeps_its_precision(problem):
+    graph, kernel, start, solved, bent = problem
+    work, seen = graph.copy(), []
+    taken = second_opinion.second_opinion(
+        work, kernel, start, _narrower_run(work, solved, seen), bent
+    )
+    assert taken is not None and taken[0] is solved
+    assert taken[1] == second_opinion.NARROWER
+    ((information, values),) = seen
+    narrower = second_opinion.NARROWER * graph.edges.information  # every precision
+    assert np.allclose(information, narrower, rtol=1e-12, atol=0)
+    assert np.allclose(values.as_matrix(), start.as_matrix())  # GNC anew from the start
+    assert np.allclose(work.edges.information, narrower, rtol=1e-12, atol=0)
+
+
+def test_a_narrower_run_that_ends_worse_leaves_the_information_as_it_was(problem):
+    graph, kernel, start, solved, bent = problem
+    work, seen = graph.copy(), []
+    edges, priors = work.edges, work.priors
+    worse = _turned(bent, 0.01)
+    taken = second_opinion.second_opinion(
+        work, kernel, start, _narrower_run(work, worse, seen), bent
+    )
+    assert taken is None and len(seen) == 1
+    assert work.edges is edges and work.priors is priors
+
+
+def test_a_solution_that_fits_the_median_loop_better_is_not_second_guessed(problem):
+    graph, kernel, start, solved, _ = problem
+    work, seen = graph.copy(), []
+    taken = second_opinion.second_opinion(
+        work, kernel, start, _narrower_run(work, solved, seen), solved
+    )
+    assert taken is None and seen == []
+
+
+def test_calibration_goes_on_from_a_second_opinion_taken(problem, monkeypatch):
+    """``calibrate``'s check found no gross outlier; the second opinion taken, calibration
+    counts its solve and its factor, and scales from its solution."""
+    graph, _, _, solved, bent = problem
+    kind = "loop closures"
+    script = iter(
+        [calibration.Estimate({kind: 1.0}, {kind: 1.0}, [], 0)]  # the check: nothing gross
+        + [calibration.Estimate({kind: 4.0}, {kind: 4.0}, [], 0)] * 2
+    )
+    monkeypatch.setattr(calibration, "estimate", lambda *args, **kwargs: next(script))
+    asked, solved_again = [], []
+
+    def second(first):
+        asked.append(first)
+        return solved, 100.0
+
+    def solve():
+        solved_again.append(solved)
+        return solved
+
+    result, found, _ = calibration.calibrate(
+        graph.copy(), bent, solve, automatic=True, robust=True, covered=(kind,), second=second
+    )
+    assert asked == [bent]
+    assert len(solved_again) == 1 and result is solved
+    assert found.automatic is True and found.solves == 2 and found.second_opinion is True
+    assert found.scales[kind] == pytest.approx(400.0) and "priors" not in found.scales
