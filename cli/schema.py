@@ -109,9 +109,8 @@ SUMMARY = {
             "required": ["scales", "automatic", "solves"],
             "properties": {
                 "scales": {"type": "object", "additionalProperties": _NUMBER},
-                "automatic": {"type": "boolean"},
                 "solves": {"type": "integer", "minimum": 0},
-                "second_opinion": {"type": "boolean"},
+                **dict.fromkeys(["automatic", "second_opinion"], {"type": "boolean"}),
             },
         },
         "history": {
