@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import sys
 import traceback
 import warnings
@@ -45,10 +46,14 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _run(argv: list[str] | None) -> int:
+    interrupts = _interrupts()
     from . import commands, data
     from .certify import certify
     from .parser import parser
     from .scale_drift import scale_drift
+
+    if interrupts:  # raised during the imports, and lost there
+        raise KeyboardInterrupt
 
     args = parser().parse_args(argv)
     handlers = {
@@ -59,6 +64,20 @@ def _run(argv: list[str] | None) -> int:
     }
     handler = handlers.get(args.command) or getattr(commands, args.command)
     return _handle(args, handler)
+
+
+def _interrupts() -> list[int]:
+    """The Ctrl-Cs from now on, each also raised as KeyboardInterrupt as Python's own handler
+    raises it: a KeyboardInterrupt raised inside the libraries' imports can be cleared by
+    their C code (scipy.sparse importing numpy.f2py), and the command would run on."""
+    seen = []
+
+    def interrupted(signum, frame) -> None:
+        seen.append(signum)
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGINT, interrupted)
+    return seen
 
 
 def _handle(args: argparse.Namespace, handler) -> int:

@@ -28,10 +28,11 @@ and dropping follow.
 A robust run at the default width calibrates on its own where it kept gross outliers: false
 loops that an information overstating the noise let the kernel keep (parking-garage's states
 20,000× its noise); and where a second opinion at a narrower width replaced a solution that
-kept none but was wrong (``robust.second_opinion``). It scales every class alike, by the smallest scale of the classes under the
-kernel (the loop closures, by default; odometry that false loops bent says little): what it
-corrects is the kernel's width relative to the noise, and the classes' relative weights, and
-with them the least-squares solution over a set of inliers, stay the file's."""
+kept none but was wrong (``robust.second_opinion``). It scales every class alike, by the
+smallest scale of the classes under the kernel (the loop closures, by default; odometry that
+false loops bent says little): what it corrects is the kernel's width relative to the noise,
+and the classes' relative weights, and with them the least-squares solution over a set of
+inliers, stay the file's."""
 
 from __future__ import annotations
 

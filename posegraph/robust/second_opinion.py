@@ -33,8 +33,11 @@ NARROWER = 100.0
 in residual units."""
 
 
-def fits_median_worse(graph: PoseGraph, measured: np.ndarray, start: LieGroup, values: LieGroup):
-    """Whether ``values`` fit the median measured between edge worse than ``start`` does."""
+def fits_median_worse(
+    graph: PoseGraph, measured: np.ndarray, start: LieGroup, values: LieGroup
+) -> bool:
+    """Whether the median s = rᵀΩr of the ``measured`` between edges is larger at ``values``
+    than at ``start``."""
     if not measured.any():
         return False
     at_start = np.median(between_squares(start, graph.edges)[measured])
