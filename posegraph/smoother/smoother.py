@@ -244,7 +244,7 @@ class Smoother:
         stopped = solved[0].summary.termination in (STOPPED, TIME_LIMIT)
         if not calibrate_noise or stopped or options.max_iterations == 0:
             return solved
-        solves, start_values = [solved], self.graph.values[np.arange(self.graph.num_nodes)]
+        solves = [solved]
 
         def again(graduate: bool = False) -> Result:  # graduate: GNC anew, a second opinion
             decisions = None
@@ -257,14 +257,14 @@ class Smoother:
         began = time.perf_counter()
         covered = () if kernel is None else kernel_classes(self.graph, kernel.measured)
         second = None
-        if automatic and kernel is not None:  # GNC at the default width
+        if automatic and kernel is not None:  # GNC at the default width, from these values
+            values = self.graph.values[np.arange(self.graph.num_nodes)]
             fresh = functools.partial(again, True)
-            second = functools.partial(second_opinion, self.graph, kernel, start_values, fresh)
+            second = functools.partial(second_opinion, self.graph, kernel, values, fresh)
         result, calibration, noise = calibrate(
             self.graph, solved[0], again, automatic, kernel is not None, covered, second
         )
-        summaries = [s[0].summary for s in solves]
-        elapsed = time.perf_counter() - began
+        summaries, elapsed = [s[0].summary for s in solves], time.perf_counter() - began
         summary = dataclasses.replace(
             in_turn_summary(result.summary, summaries, "noise check", elapsed),
             noise=[c.as_dict() for c in noise],
