@@ -4,6 +4,7 @@ from __future__ import annotations
 
 _NUMBER = {"type": ["number", "null"]}
 """A number, or null where it is not finite (JSON has no NaN or ∞): an error that overflowed."""
+_COUNT = {"type": "integer", "minimum": 0}
 _STATS = {
     "type": "object",
     "required": ["rmse", "mean", "median", "max", "count"],
@@ -51,7 +52,7 @@ NOISE = {
             "count": {"type": "integer", "minimum": 1},
             "redundancy": _NUMBER,
             "chi2_per_dof": {"type": ["number", "null"]},
-            "above_quantile": {"type": "integer", "minimum": 0},
+            "above_quantile": _COUNT,
         },
     },
 }
@@ -84,7 +85,7 @@ SUMMARY = {
         "final_error": _NUMBER,
         "initial_chi2": _NUMBER,
         "final_chi2": _NUMBER,
-        "iterations": {"type": "integer", "minimum": 0},
+        "iterations": _COUNT,
         "termination": {"type": "string"},
         "converged": {"type": "boolean"},
         "phase_times": {
@@ -101,15 +102,14 @@ SUMMARY = {
         "robust": {"type": ["string", "null"]},
         "rejected_edges": {"type": "array", "items": {"type": "integer"}},
         "rejected_priors": {"type": "array", "items": {"type": "integer"}},
-        "edges_under_kernel": {"type": "integer", "minimum": 0},
-        "priors_under_kernel": {"type": "integer", "minimum": 0},
+        **dict.fromkeys(["edges_under_kernel", "priors_under_kernel"], _COUNT),
         "noise": NOISE,
         "calibration": {
             "type": ["object", "null"],
             "required": ["scales", "automatic", "solves"],
             "properties": {
                 "scales": {"type": "object", "additionalProperties": _NUMBER},
-                "solves": {"type": "integer", "minimum": 0},
+                **dict.fromkeys(["solves", "consistent_rejections"], _COUNT),
                 **dict.fromkeys(["automatic", "second_opinion"], {"type": "boolean"}),
             },
         },
@@ -155,7 +155,7 @@ Ctrl-C (exit 1 when outputs were written first, else 130): ``message`` is the li
 ``path`` and ``line`` name the file and line at fault."""
 
 _READING = {
-    "repaired_information": {"type": "integer", "minimum": 0},
+    "repaired_information": _COUNT,
     "rotation_information": {"enum": ["phi", "quaternion", None]},
 }
 """How the information was read: the matrices that ``--repair-information`` changed, and the
@@ -284,8 +284,8 @@ SCHEMAS = {
             "tag_counts": {"type": "object", "additionalProperties": {"type": "integer"}},
             "components": {"type": "array", "items": {"type": "integer"}},
             "condition_numbers": {"type": "object", "additionalProperties": _NUMBER},
-            "singular_information": {"type": "integer", "minimum": 0},
-            "loop_closures": {"type": "integer", "minimum": 0},
+            "singular_information": _COUNT,
+            "loop_closures": _COUNT,
             "lifted_scale_information": {"type": ["number", "null"]},
             **_READING,
             "problems": {

@@ -83,6 +83,11 @@ def _noise_lines(summary: Summary) -> list[str]:
                 "GNC's solution fit the median loop closure worse than its start; GNC at a"
                 " tenth of the width fit it better"
             )
+        elif calibration.get("consistent_rejections"):
+            why = (
+                f"GNC rejected {calibration['consistent_rejections']} measurements that the"
+                " noise of those it kept explains"
+            )
         elif calibration["automatic"]:
             why = "GNC kept gross outliers under the noise the residuals show"
         lines.append(
@@ -171,8 +176,8 @@ def _written_lines(written: dict[str, str | None]) -> list[str]:
 
 MOST_REJECTED = (
     "most of the edges under the kernel were rejected: if they are true, their information (or"
-    " the trusted edges') overstates their accuracy; check it, or widen the kernel"
-    " (--robust {kernel}:WIDTH)"
+    " the trusted edges') overstates their accuracy: --calibrate-noise estimates it, taking"
+    " most of them as true; or widen the kernel (--robust {kernel}:WIDTH)"
 )
 """The report's hint when a robust run rejected more than half of the edges it covered."""
 

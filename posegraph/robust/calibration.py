@@ -27,12 +27,18 @@ and dropping follow.
 
 A robust run at the default width calibrates on its own where it kept gross outliers: false
 loops that an information overstating the noise let the kernel keep (parking-garage's states
-20,000× its noise); and where a second opinion at a narrower width replaced a solution that
-kept none but was wrong (``robust.second_opinion``). It scales every class alike, by the
-smallest scale of the classes under the kernel (the loop closures, by default; odometry that
-false loops bent says little): what it corrects is the kernel's width relative to the noise,
-and the classes' relative weights, and with them the least-squares solution over a set of
-inliers, stay the file's."""
+20,000× its noise); where it rejected measurements that the noise of those it kept explains
+(more than ``FALSE_SHARE`` of those under the kernel pass the test under the kept ones' median
+scales: an information understating the noise, whose narrow width rejected true loops with
+the false); and where a second opinion at a narrower width replaced a solution that kept none
+but was wrong (``robust.second_opinion``). It scales every class alike, by the smallest scale
+of the classes under the kernel (the loop closures, by default; odometry that false loops bent
+says little): what it corrects is the kernel's width relative to the noise, and the classes'
+relative weights, and with them the least-squares solution over a set of inliers, stay the
+file's. Where the measurements kept tell nothing of a class's noise (GNC rejected nearly all of
+it), only an asked-for calibration estimates it from the rejected ones, taking their majority
+as true: on its own, robust mode cannot tell true loops under a width far too narrow from
+false ones."""
 
 from __future__ import annotations
 
@@ -51,6 +57,7 @@ from ..solvers import Result
 from .kernels import default_width
 from .leverage import Leverage
 from .noise import (
+    FALSE_SHARE,
     KINDS,
     OFF_BY,
     QUANTILE,
@@ -78,13 +85,15 @@ measures) say nothing of the noise: their deleted residual is r̃ᵀ(I − M)⁻
 @dataclasses.dataclass(frozen=True)
 class Calibration:
     """What calibration did: the factor each class's information was multiplied by, whether it
-    ran on its own (``automatic``), the solves it took after the first, and whether it began
-    at a second opinion's narrower width (``robust.second_opinion``)."""
+    ran on its own (``automatic``), the solves it took after the first, whether it began at a
+    second opinion's narrower width (``robust.second_opinion``), and how many rejections that
+    the kept measurements' noise explains set it off (0 where they did not)."""
 
     scales: dict[str, float]
     automatic: bool
     solves: int
     second_opinion: bool = False
+    consistent_rejections: int = 0
 
     def as_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -100,6 +109,9 @@ class Estimate:
     tail: dict[str, float]
     classes: list[NoiseClass]
     gross: int
+    consistent: int = 0
+    """Measurements outside the inliers that pass the test under the median scales (in a class
+    without one, the smallest of the others')."""
 
     def scales(self) -> dict[str, float]:
         """The smaller of the two scales of each class."""
@@ -111,13 +123,15 @@ def estimate(
     values: LieGroup,
     edge_inliers: np.ndarray | None = None,
     prior_inliers: np.ndarray | None = None,
-    left_out: bool = True,
+    majority: bool = True,
 ) -> Estimate:
     """The estimate at ``values``, a least-squares solution over the given inliers (by default
     every measurement, of which those that pass Baarda's test under their class's scale are
-    the inliers). With ``left_out``, the measurements left out are tested by their innovation
-    against the solution (a prior's by its s) and count in the tail scales, so that true ones
-    of a heavy tail, rejected under a scale that was too large, pull it back."""
+    the inliers). The measurements left out are tested by their innovation against the
+    solution (a prior's by its s) and count in the tail scales, so that true ones of a heavy
+    tail, rejected under a scale that was too large, pull it back. ``majority``: a class whose
+    inliers tell nothing of its noise takes the majority of its others as true (``_estimate``);
+    without it, such a class has no scale."""
     if edge_inliers is None:
         tests = measurement_tests(graph, values)
         inliers = np.ones(tests.kinds.size, dtype=bool)
@@ -130,12 +144,9 @@ def estimate(
             found = _estimate(tests, inliers)
         return found
     work = _inliers(graph, edge_inliers, prior_inliers)
-    if not left_out:
-        tests = measurement_tests(work, values)
-        return _estimate(tests, np.ones(tests.kinds.size, dtype=bool))
     tests = _with_left_out(graph, work, values, edge_inliers, prior_inliers)
     inliers = np.arange(tests.kinds.size) < work.num_edges + len(work.priors)
-    return _estimate(tests, inliers)
+    return _estimate(tests, inliers, majority)
 
 
 def _with_left_out(graph, work, values, edge_inliers, prior_inliers) -> MeasurementTests:
@@ -167,25 +178,51 @@ def _with_left_out(graph, work, values, edge_inliers, prior_inliers) -> Measurem
     return MeasurementTests(*joined)
 
 
-def _estimate(tests: MeasurementTests, inliers: np.ndarray) -> Estimate:
+def _estimate(tests: MeasurementTests, inliers: np.ndarray, majority: bool = True) -> Estimate:
     """The estimate from ``tests``: median scales over the ``inliers``, gross outliers among
-    all, tail scales over all but the gross ones, and the inliers' noise consistency."""
+    all, tail scales over all but the gross ones, and the inliers' noise consistency. A class
+    whose inliers tell nothing of its noise (a robust solve rejected nearly all of it) takes,
+    with ``majority``, the median scale of its other measurements, whose majority is then
+    taken as true (as least median of squares takes it), for its tail scale too: its false
+    measurements would set that."""
     telling = (tests.redundancy >= REDUNDANT * tests.rank) & (tests.tested > 0)
     telling &= np.isfinite(tests.tested)
-    median, tail = {}, {}
-    for index, kind in enumerate(KINDS):
-        members = inliers & telling & (tests.kinds == index)
-        if np.count_nonzero(members) >= FEWEST:
-            expected = _chi2_medians()[tests.rank[members]]
-            median[kind] = float(np.median(expected / tests.tested[members]))
+    median = _medians(tests, inliers & telling)
+    guessed = _medians(tests, ~inliers & telling) if majority else {}
+    guessed = {kind: scale for kind, scale in guessed.items() if kind not in median}
+    median |= guessed
+    tail = dict(guessed)
     gross = tests.tested * _by_measurement(tests, median) > OFF_BY * tests.limits
     for index, kind in enumerate(KINDS):
         members = telling & ~gross & (tests.kinds == index)
-        if kind in median:
+        if kind in median and kind not in guessed:
             bounds = np.sort(tests.limits[members] / tests.tested[members])
             allowed = max(1, int((1.0 - QUANTILE) * bounds.size))
             tail[kind] = float(bounds[allowed]) if bounds.size > allowed else np.inf
-    return Estimate(median, tail, tests.classes(inliers), int(np.count_nonzero(gross & inliers)))
+    found = Estimate(median, tail, [], int(np.count_nonzero(gross & inliers)))
+    return _with_consistent(tests, inliers, telling, found)
+
+
+def _with_consistent(tests, inliers, telling, found: Estimate) -> Estimate:
+    """``found`` with the inliers' noise consistency and the count of the measurements outside
+    them that pass the test under its median scales (``Estimate.consistent``; none without)."""
+    median, consistent = found.median, 0
+    if median:
+        pooled = dict.fromkeys(KINDS, min(median.values())) | median
+        passing = tests.tested * _by_measurement(tests, pooled) <= tests.limits
+        consistent = int(np.count_nonzero(passing & telling & ~inliers))
+    return dataclasses.replace(found, classes=tests.classes(inliers), consistent=consistent)
+
+
+def _medians(tests: MeasurementTests, members: np.ndarray) -> dict[str, float]:
+    """Each class's median scale over its ``members``, where it has ``FEWEST``."""
+    median = {}
+    for index, kind in enumerate(KINDS):
+        of_kind = members & (tests.kinds == index)
+        if np.count_nonzero(of_kind) >= FEWEST:
+            expected = _chi2_medians()[tests.rank[of_kind]]
+            median[kind] = float(np.median(expected / tests.tested[of_kind]))
+    return median
 
 
 @functools.cache
@@ -237,31 +274,31 @@ def calibrate(
     brings gross outliers back (false loops that the search re-admitted at the wider width, or
     a tail heavier than the median scale allows), calibration ends there, with the decisions
     from before it settled at the wider width. ``automatic``: only where the first solve kept
-    gross outliers or ``second(first)`` replaces it (``robust.second_opinion``: a narrower
-    width's result, and its precision factor; else the graph is untouched and the calibration
-    None), every class scaled alike, by the smallest scale of the classes under the kernel
-    (``covered``). Returns the last result, the calibration, and the noise consistency of the
-    measurements it kept."""
+    gross outliers, rejected measurements that the kept ones' noise explains
+    (``_consistent_rejections``), or ``second(first)`` replaces it (``robust.second_opinion``:
+    a narrower width's result, and its precision factor; else the graph is untouched and the
+    calibration None), every class scaled alike, by the smallest scale of the classes under
+    the kernel (``covered``), and no class's scale guessed from what was rejected. Returns
+    the last result, the calibration, and the noise consistency of the measurements it kept."""
     result, total, solves, classes, narrower = first, dict.fromkeys(KINDS, 1.0), 0, [], None
+    consistent = 0  # rejections that the kept measurements' noise explains, where they set it off
+    present = tuple(KINDS[kind] for kind in np.unique(measurement_kinds(graph)))
     stalled = False  # the last scaling changed no decision, nor would others
     widened = False  # the last scaling lowered every precision
     while True:
-        inliers = kept(graph, result) if robust else (None, None)
-        checking = automatic and solves == 0  # the gross outliers first; the tail if any
-        try:
-            found = estimate(graph, result.values, *inliers, left_out=not checking)
-            if checking and found.gross:
-                found = estimate(graph, result.values, *inliers)
-        except (NotPositiveDefinite, np.linalg.LinAlgError):  # no covariance: nothing to test
+        checking = automatic and solves == 0
+        found = _estimate_at(graph, result, robust, automatic)
+        if found is None:  # no covariance: nothing to test
             break
         classes = found.classes
-        if checking and not found.gross:
+        consistent = _consistent_rejections(graph, found, covered) if checking else consistent
+        if checking and not found.gross and not consistent:
             if second is None or (narrower := second(result)) is None:
                 return result, None, classes
             (result, factor), solves = narrower, 1
-            total.update((KINDS[kind], factor) for kind in np.unique(measurement_kinds(graph)))
+            total.update(dict.fromkeys(present, factor))
             continue
-        scales = _scaling(found, robust, automatic, covered)
+        scales = _scaling(found, robust, automatic, covered, present)
         settled = all(1 / SETTLED <= s <= SETTLED for s in scales.values())
         if solves == ROUNDS or settled or stalled or (robust and widened and found.gross):
             break
@@ -269,27 +306,52 @@ def calibrate(
         total.update((kind, total[kind] * scale) for kind, scale in scales.items())
         graph.set_values(result.values, check=False)
         before = kept(graph, result)
-        widened = not found.gross and all(scale <= 1.0 for scale in scales.values())
+        widened = solves > 0 and not found.gross and all(scale <= 1.0 for scale in scales.values())
         result, solves = solve(), solves + 1
         stalled = robust and all(map(np.array_equal, before, kept(graph, result)))
     if automatic and solves == 0:
         return result, None, classes
-    present = {c.kind for c in classes}
-    scales = {k: v for k, v in total.items() if k in present or v != 1.0}
-    calibration = Calibration(scales, automatic, solves, second_opinion=narrower is not None)
+    scales = {kind: total[kind] for kind in present}
+    calibration = Calibration(scales, automatic, solves, narrower is not None, consistent)
     return result, calibration, classes
 
 
+def _estimate_at(
+    graph: PoseGraph, result: Result, robust: bool, automatic: bool
+) -> Estimate | None:
+    """The estimate at a solve's result (``calibrate``), or None where the information matrix
+    has no covariance to test with."""
+    inliers = kept(graph, result) if robust else (None, None)
+    try:
+        return estimate(graph, result.values, *inliers, majority=not automatic)
+    except (NotPositiveDefinite, np.linalg.LinAlgError):
+        return None
+
+
+def _consistent_rejections(graph: PoseGraph, found: Estimate, covered: tuple[str, ...]) -> int:
+    """How many measurements a robust solve rejected that pass the test under the median scales
+    of those it kept, where they are more than ``FALSE_SHARE`` of the measurements under the
+    kernel (the classes ``covered``): its width was too narrow for the noise. Else 0."""
+    under = np.isin(measurement_kinds(graph), [KINDS.index(kind) for kind in covered])
+    many = max(1.0, FALSE_SHARE * np.count_nonzero(under))
+    return found.consistent if found.consistent > many else 0
+
+
 def _scaling(
-    found: Estimate, robust: bool, automatic: bool, covered: tuple[str, ...]
+    found: Estimate,
+    robust: bool,
+    automatic: bool,
+    covered: tuple[str, ...],
+    present: tuple[str, ...],
 ) -> dict[str, float]:
     """The scales to apply after ``found`` (``calibrate``): the median scales where a robust
-    solve kept gross outliers, else the smaller of each class's two; automatic, the smallest
-    of the classes under the kernel for all (the kernel's width, not the classes' weights)."""
+    solve kept gross outliers, else the smaller of each class's two; automatic, for every
+    class ``present``, the smallest of the classes under the kernel (the kernel's width, not
+    the classes' weights), or of the others where none of those has one."""
     scales = found.median if robust and found.gross else found.scales()
-    under_kernel = [scales[kind] for kind in covered if kind in scales]
-    if automatic and under_kernel:
-        scales = dict.fromkeys(scales, min(under_kernel))
+    if automatic and scales:
+        under_kernel = [scales[kind] for kind in covered if kind in scales]
+        scales = dict.fromkeys(present, min(under_kernel or scales.values()))
     return scales
 
 

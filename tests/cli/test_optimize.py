@@ -368,9 +368,10 @@ def test_robust_report_names_the_rejected_loops_by_their_nodes(tmp_path):
 def test_robust_report_says_when_most_loops_were_rejected(tmp_path):
     """Where every edge's information overstates its accuracy 1000-fold, the loops all fail
     GNC's gate against the trusted odometry: the report then says that most were rejected and
-    what to check. With the file's information, where only the false loops go, it does not."""
+    what to do, and --calibrate-noise takes the true ones back. With the file's information,
+    where only the false loops go, it does not."""
     graph, _ = city_with_fixes(0.0, seed=0)
-    corrupted, _ = add_false_loops(graph, 0.1, seed=0)
+    corrupted, false = add_false_loops(graph, 0.1, seed=0)
     path = tmp_path / "loops.g2o"
     write_graph(corrupted, str(path))
     assert (
@@ -383,7 +384,11 @@ def test_robust_report_says_when_most_loops_were_rejected(tmp_path):
     rejected = run_json("optimize", path, "--robust", "gnc")["summary"]["rejected_edges"]
     assert 2 * len(rejected) > loops.sum()
     assert "most of the edges under the kernel were rejected" in text
+    assert "--calibrate-noise estimates it" in text
     assert "widen the kernel (--robust gnc:WIDTH)" in text
+    calibrated = run_json("optimize", path, "--robust", "gnc", "--calibrate-noise")["summary"]
+    rejected = np.asarray(calibrated["rejected_edges"])
+    assert set(rejected) == set(np.flatnonzero(false))
 
 
 def test_a_closed_output_pipe_ends_quietly():

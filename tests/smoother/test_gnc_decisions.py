@@ -240,7 +240,8 @@ def test_gnc_streamed_keeps_decisions_that_beat_its_stages(shared_dataset):
     GNC's stages from there keep a false loop and reject three true ones; the decisions settled
     from that solution reach a lower TLS objective, and the search goes on from them. The stream
     ends with every false loop rejected and every true one kept, below the TLS objective of GNC
-    on the whole graph from scratch (which rejects 3 of the 20 true loops)."""
+    on the whole graph from scratch at the file's information (which rejects 2 of the 20 true
+    loops; robust mode would then calibrate)."""
     full = read_graph(shared_dataset("MIT.g2o")).graph
     full, false = add_false_loops(full, 0.3, seed=0)
     false = false[np.argsort(arrivals(full, 10)[1], kind="stable")]
@@ -250,7 +251,8 @@ def test_gnc_streamed_keeps_decisions_that_beat_its_stages(shared_dataset):
         summary = smoother.optimize(robust="gnc").summary
     assert summary.rejected_edges == np.flatnonzero(false).tolist()
     scratch = graph.copy()
-    assert summary.final_error < posegraph.optimize(scratch, robust="gnc").summary.final_error
+    from_scratch = posegraph.optimize(scratch, robust="gnc", calibrate_noise=False).summary
+    assert summary.final_error < from_scratch.final_error
 
 
 @pytest.mark.parametrize("which", ["true", "false"])
