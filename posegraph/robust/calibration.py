@@ -30,8 +30,9 @@ loops that an information overstating the noise let the kernel keep (parking-gar
 20,000× its noise); where it rejected measurements that the noise of those it kept explains
 (more than ``FALSE_SHARE`` of those under the kernel pass the test under the kept ones' median
 scales: an information understating the noise, whose narrow width rejected true loops with
-the false); and where a second opinion at a narrower width replaced a solution that kept none
-but was wrong (``robust.second_opinion``). It scales every class alike, by the smallest scale
+the false; GNC then runs anew at the calibrated width, ``robust.second_opinion``); and where
+a second opinion at a narrower width replaced a solution that kept none but was wrong
+(``robust.second_opinion``). It scales every class alike, by the smallest scale
 of the classes under the kernel (the loop closures, by default; odometry that false loops bent
 says little): what it corrects is the kernel's width relative to the noise, and the classes'
 relative weights, and with them the least-squares solution over a set of inliers, stay the
@@ -263,28 +264,26 @@ def calibrate(
     robust: bool,
     covered: tuple[str, ...] = (),
     second: Callable[[Result], tuple[Result, float] | None] | None = None,
+    anew: Callable[[Result], Result | None] | None = None,
 ) -> tuple[Result, Calibration | None, list[NoiseClass]]:
     """Calibrates ``graph``'s information from a solve's ``first`` result, re-solving with
     ``solve()`` (from the graph's values, which it sets to the last solution first) after each
     scaling (module docstring): a robust solve settles the last solve's decisions at the new
-    width and searches from them.
-    ``robust``: the inliers are what each solve did not reject (its summary's
-    ``rejected_edges`` and ``rejected_priors``); where some are gross outliers the median
-    scales apply, the tail scales after, and where a scaling that lowered every precision
-    brings gross outliers back (false loops that the search re-admitted at the wider width, or
-    a tail heavier than the median scale allows), calibration ends there, with the decisions
-    from before it settled at the wider width. ``automatic``: only where the first solve kept
-    gross outliers, rejected measurements that the kept ones' noise explains
-    (``_consistent_rejections``), or ``second(first)`` replaces it (``robust.second_opinion``:
-    a narrower width's result, and its precision factor; else the graph is untouched and the
-    calibration None), every class scaled alike, by the smallest scale of the classes under
-    the kernel (``covered``), and no class's scale guessed from what was rejected. Returns
-    the last result, the calibration, and the noise consistency of the measurements it kept."""
+    width and searches from them. ``robust``: the inliers are what each solve did not reject;
+    where some are gross outliers the median scales apply, the tail scales after, and where a
+    scaling that lowered every precision brings gross outliers back (false loops re-admitted
+    at the wider width, or a tail heavier than the median scale allows), calibration ends
+    there, with the decisions from before it settled at the wider width. ``automatic``: only
+    where the first solve kept gross outliers, rejected measurements that the kept ones' noise
+    explains (``_consistent_rejections``; once settled, ``anew(result)``, GNC anew at the
+    calibrated width, may replace the result), or ``second(first)`` replaces it
+    (``robust.second_opinion``: a narrower width's result and its precision factor; else the
+    graph is untouched and the calibration None); every class scaled alike, by the smallest
+    scale of the classes under the kernel (``covered``), none guessed from what was rejected.
+    Returns the last result, the calibration, and the noise consistency of what it kept."""
     result, total, solves, classes, narrower = first, dict.fromkeys(KINDS, 1.0), 0, [], None
-    consistent = 0  # rejections that the kept measurements' noise explains, where they set it off
-    present = tuple(KINDS[kind] for kind in np.unique(measurement_kinds(graph)))
-    stalled = False  # the last scaling changed no decision, nor would others
-    widened = False  # the last scaling lowered every precision
+    consistent, present = 0, tuple(KINDS[kind] for kind in np.unique(measurement_kinds(graph)))
+    stalled = widened = False  # the last scaling: changed no decision; lowered every precision
     while True:
         checking = automatic and solves == 0
         found = _estimate_at(graph, result, robust, automatic)
@@ -301,7 +300,10 @@ def calibrate(
         scales = _scaling(found, robust, automatic, covered, present)
         settled = all(1 / SETTLED <= s <= SETTLED for s in scales.values())
         if solves == ROUNDS or settled or stalled or (robust and widened and found.gross):
-            break
+            if not consistent or anew is None or (fresh := anew(result)) is None:
+                break
+            result, solves, anew = fresh, solves + 1, None
+            continue
         scale_information(graph, scales)
         total.update((kind, total[kind] * scale) for kind, scale in scales.items())
         graph.set_values(result.values, check=False)

@@ -11,10 +11,17 @@ solution with fewer than half its loops false never should: the least median of 
 criterion (Rousseeuw 1984, "Least Median of Squares Regression") is what tells them apart.
 GNC then runs again from the same start with every precision ``NARROWER`` times higher, and
 its solution replaces the first where it has the lower TLS objective at the file's
-information (calibration then scales the information from there)."""
+information (calibration then scales the information from there).
+
+Where GNC's first width was too narrow instead (it rejected true loops that the noise of
+what it kept explains, ``calibration``), the decisions that calibration settles from that run at the
+wider width can stay bent around the true loops it rejected: GNC then runs anew from the start
+at the calibrated width, and its solution replaces the settled one where its TLS objective is
+lower."""
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 
 import numpy as np
@@ -44,34 +51,49 @@ def fits_median_worse(
     return bool(np.median(between_squares(values, graph.edges)[measured]) > at_start)
 
 
-def second_opinion(
-    graph: PoseGraph,
-    kernel: Kernel,
-    start: LieGroup,
-    solve: Callable[[], Result],
-    first: Result,
-) -> tuple[Result, float] | None:
-    """The narrower run's result and its precision factor where ``first``, a GNC run from
-    ``start`` at the graph's information, fits the median measurement worse than ``start``
-    and the narrower run (``solve()``, GNC from the graph's values, which this sets to
-    ``start``) ends with a lower TLS objective at the graph's information; the graph's
-    information is then left multiplied by the factor. Else None, the graph as it was."""
-    measured = kernel.measured[: graph.num_edges]
-    if not fits_median_worse(graph, measured, start, first.values):
-        return None
-    information = graph.edges, graph.priors
-    scale_information(graph, dict.fromkeys(KINDS, NARROWER))
-    narrower = graph.edges, graph.priors
-    graph.set_values(start, check=False)
-    result = solve()
-    graph.edges, graph.priors = information
-    if _objective(graph, kernel, result.values) >= _objective(graph, kernel, first.values):
-        return None
-    graph.edges, graph.priors = narrower
-    return result, NARROWER
+@dataclasses.dataclass(frozen=True)
+class FromStart:
+    """GNC runs anew from the ``start`` of a robust call at the default width, which
+    calibration asks for: ``solve()`` runs GNC from the graph's values, which these set to
+    ``start``, at the graph's information as it then is."""
 
+    graph: PoseGraph
+    kernel: Kernel
+    start: LieGroup
+    solve: Callable[[], Result]
 
-def _objective(graph: PoseGraph, kernel: Kernel, values: LieGroup) -> float:
-    """The TLS cost that GNC minimises, at ``values``."""
-    graph.set_values(values, check=False)
-    return cost(graph, kernel)
+    def second_opinion(self, first: Result) -> tuple[Result, float] | None:
+        """The narrower run's result and its precision factor where ``first``, a GNC run from
+        ``start`` at the graph's information, fits the median measurement worse than
+        ``start`` and the narrower run ends with a lower TLS objective at the graph's
+        information; the graph's information is then left multiplied by the factor. Else
+        None, the graph as it was."""
+        graph = self.graph
+        measured = self.kernel.measured[: graph.num_edges]
+        if not fits_median_worse(graph, measured, self.start, first.values):
+            return None
+        information = graph.edges, graph.priors
+        scale_information(graph, dict.fromkeys(KINDS, NARROWER))
+        narrower = graph.edges, graph.priors
+        result = self._run()
+        graph.edges, graph.priors = information
+        if self._objective(result.values) >= self._objective(first.values):
+            return None
+        graph.edges, graph.priors = narrower
+        return result, NARROWER
+
+    def anew(self, settled: Result) -> Result | None:
+        """GNC anew at the graph's information, its result where its TLS objective there is
+        lower than that of ``settled``: decisions settled from a first run whose width was
+        too narrow can stay bent around the true loops it rejected. Else None."""
+        result = self._run()
+        return result if self._objective(result.values) < self._objective(settled.values) else None
+
+    def _run(self) -> Result:
+        self.graph.set_values(self.start, check=False)
+        return self.solve()
+
+    def _objective(self, values: LieGroup) -> float:
+        """The TLS cost that GNC minimises, at ``values``."""
+        self.graph.set_values(values, check=False)
+        return cost(self.graph, self.kernel)

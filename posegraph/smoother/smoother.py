@@ -16,7 +16,7 @@ from ..problem.linear import NormalEquations
 from ..robust.calibration import calibrate, kernel_classes
 from ..robust.kernels import Robustifier
 from ..robust.run import cost, robust_solve, with_robust_record
-from ..robust.second_opinion import second_opinion
+from ..robust.second_opinion import FromStart
 from ..robust.spec import Kernel, RobustSpec, resolve
 from ..solvers import STOPPED, TIME_LIMIT, Callback, Result, SolverOptions, solve
 from ..solvers.summary import in_turn_summary
@@ -256,13 +256,13 @@ class Smoother:
 
         began = time.perf_counter()
         covered = () if kernel is None else kernel_classes(self.graph, kernel.measured)
-        second = None
+        second = anew = None
         if automatic and kernel is not None:  # GNC at the default width, from these values
             values = self.graph.values[np.arange(self.graph.num_nodes)]
-            fresh = functools.partial(again, True)
-            second = functools.partial(second_opinion, self.graph, kernel, values, fresh)
+            runs = FromStart(self.graph, kernel, values, functools.partial(again, True))
+            second, anew = runs.second_opinion, runs.anew
         result, calibration, noise = calibrate(
-            self.graph, solved[0], again, automatic, kernel is not None, covered, second
+            self.graph, solved[0], again, automatic, kernel is not None, covered, second, anew
         )
         summaries, elapsed = [s[0].summary for s in solves], time.perf_counter() - began
         summary = dataclasses.replace(

@@ -496,8 +496,9 @@ def test_calibrate_noise_reports_the_scales_and_writes_the_scaled_information(tm
 
 
 def test_the_summary_says_why_robust_mode_calibrated():
-    """Automatic calibration names its reason: gross outliers kept, or a second opinion at a
-    narrower width (``robust.second_opinion``) taken."""
+    """Automatic calibration names its reason: gross outliers kept, rejections that the noise
+    of the kept measurements explains, or a second opinion at a narrower width
+    (``robust.second_opinion``) taken."""
     import dataclasses
 
     from posegraph_cli.summary import _noise_lines
@@ -508,10 +509,14 @@ def test_the_summary_says_why_robust_mode_calibrated():
     graph, _ = manhattan_world(30, seed=4)
     summary = posegraph.optimize(graph, robust="gnc").summary
     assert summary.noise and summary.calibration is None
-    for second, reason in [(False, "GNC kept gross outliers"), (True, "a tenth of the width")]:
+    reasons = [
+        (False, 0, "GNC kept gross outliers"),
+        (False, 12, "GNC rejected 12 measurements that the noise of those it kept explains"),
+        (True, 0, "a tenth of the width"),
+    ]
+    for second, consistent, reason in reasons:
         calibration = {"scales": {"odometry": 400.0}, "automatic": True, "solves": 3}
-        calibrated = dataclasses.replace(
-            summary, calibration={**calibration, "second_opinion": second}
-        )
+        calibration |= {"second_opinion": second, "consistent_rejections": consistent}
+        calibrated = dataclasses.replace(summary, calibration=calibration)
         (line,) = [line for line in _noise_lines(calibrated) if "calibrated" in line]
         assert reason in line and "odometry ×400" in line

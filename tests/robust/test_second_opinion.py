@@ -1,6 +1,8 @@
-"""The second opinion at a narrower width: asked only where GNC's solution fits the median loop
-closure worse than its start did, taken only where its TLS objective at the file's information
-is lower, and the graph's information left as it was otherwise."""
+"""GNC's runs from the start that calibration asks for. The second opinion at a narrower width:
+asked only where GNC's solution fits the median loop closure worse than its start did, taken
+only where its TLS objective at the file's information is lower, and the graph's information
+left as it was otherwise. GNC anew at a calibrated width: taken only where its TLS objective is
+lower than the settled solution's."""
 
 from __future__ import annotations
 
@@ -35,15 +37,15 @@ def _turned(result, radians: float):
     return dataclasses.replace(result, values=values)
 
 
-def _narrower_run(graph, values, seen):
-    """A scripted second opinion ending at ``values``; it records the information and the
-    values it starts from."""
+def _runs(graph, kernel, start, values, seen):
+    """GNC's runs from ``start`` on ``graph``, scripted to end at ``values``; each records the
+    information and the values it starts from."""
 
     def solve():
         seen.append((graph.edges.information, graph.values))
         return values
 
-    return solve
+    return second_opinion.FromStart(graph, kernel, start, solve)
 
 
 def test_a_solution_that_fits_the_median_loop_worse_than_its_start_asks_for_it(problem):
@@ -57,9 +59,7 @@ def test_a_solution_that_fits_the_median_loop_worse_than_its_start_asks_for_it(p
 def test_the_narrower_run_replaces_a_worse_solution_and_keeps_its_precision(problem):
     graph, kernel, start, solved, bent = problem
     work, seen = graph.copy(), []
-    taken = second_opinion.second_opinion(
-        work, kernel, start, _narrower_run(work, solved, seen), bent
-    )
+    taken = _runs(work, kernel, start, solved, seen).second_opinion(bent)
     assert taken is not None and taken[0] is solved
     assert taken[1] == second_opinion.NARROWER
     ((information, values),) = seen
@@ -74,9 +74,7 @@ def test_a_narrower_run_that_ends_worse_leaves_the_information_as_it_was(problem
     work, seen = graph.copy(), []
     edges, priors = work.edges, work.priors
     worse = _turned(bent, 0.01)
-    taken = second_opinion.second_opinion(
-        work, kernel, start, _narrower_run(work, worse, seen), bent
-    )
+    taken = _runs(work, kernel, start, worse, seen).second_opinion(bent)
     assert taken is None and len(seen) == 1
     assert work.edges is edges and work.priors is priors
 
@@ -84,9 +82,7 @@ def test_a_narrower_run_that_ends_worse_leaves_the_information_as_it_was(problem
 def test_a_solution_that_fits_the_median_loop_better_is_not_second_guessed(problem):
     graph, kernel, start, solved, _ = problem
     work, seen = graph.copy(), []
-    taken = second_opinion.second_opinion(
-        work, kernel, start, _narrower_run(work, solved, seen), solved
-    )
+    taken = _runs(work, kernel, start, solved, seen).second_opinion(solved)
     assert taken is None and seen == []
 
 
@@ -117,3 +113,41 @@ def test_calibration_goes_on_from_a_second_opinion_taken(problem, monkeypatch):
     assert len(solved_again) == 1 and result is solved
     assert found.automatic is True and found.solves == 2 and found.second_opinion is True
     assert found.scales[kind] == pytest.approx(400.0) and "priors" not in found.scales
+
+
+def test_gnc_anew_replaces_a_settled_solution_only_where_its_objective_is_lower(problem):
+    graph, kernel, start, solved, bent = problem
+    work, seen = graph.copy(), []
+    assert _runs(work, kernel, start, solved, seen).anew(bent) is solved
+    ((information, values),) = seen
+    assert np.array_equal(information, graph.edges.information)  # at the graph's information
+    assert np.allclose(values.as_matrix(), start.as_matrix())  # from the start
+    assert _runs(work, kernel, start, bent, seen).anew(solved) is None
+
+
+@pytest.mark.parametrize("lower", [True, False])
+def test_calibration_runs_gnc_anew_where_consistent_rejections_set_it_off(
+    problem, monkeypatch, lower
+):
+    """``calibrate``'s check found rejections that the kept measurements' noise explains; once the scaling settles, GNC runs anew, and its result is taken
+    where ``anew`` gives one (its TLS objective was lower), counted as a solve."""
+    graph, _, _, solved, bent = problem
+    kind = "loop closures"
+    script = iter(
+        [calibration.Estimate({kind: 0.1}, {kind: 0.1}, [], 0, consistent=5)]
+        + [calibration.Estimate({kind: 1.0}, {kind: 1.0}, [], 0)] * 2
+    )
+    monkeypatch.setattr(calibration, "estimate", lambda *args, **kwargs: next(script))
+    asked = []
+
+    def anew(settled):
+        asked.append(settled)
+        return solved if lower else None
+
+    result, found, _ = calibration.calibrate(
+        graph.copy(), bent, lambda: bent, True, True, (kind,), anew=anew
+    )
+    assert asked == [bent]
+    assert result is (solved if lower else bent)
+    assert found.solves == (2 if lower else 1) and found.consistent_rejections == 5
+    assert found.scales[kind] == pytest.approx(0.1)
