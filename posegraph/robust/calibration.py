@@ -32,9 +32,9 @@ loops that an information overstating the noise let the kernel keep (parking-gar
 scales: an information understating the noise, whose narrow width rejected true loops with
 the false; GNC then runs anew at the calibrated width, ``robust.second_opinion``); and where
 a second opinion at a narrower width replaced a solution that kept none but was wrong
-(``robust.second_opinion``). It scales every class alike, by the smallest scale
-of the classes under the kernel (the loop closures, by default; odometry that false loops bent
-says little): what it corrects is the kernel's width relative to the noise, and the classes'
+(``robust.second_opinion``). It scales every class alike, by the smallest scale of the
+classes under the kernel (the loop closures, by default; odometry that false loops bent says
+little): what it corrects is the kernel's width relative to the noise, and the classes'
 relative weights, and with them the least-squares solution over a set of inliers, stay the
 file's. Where the measurements kept tell nothing of a class's noise (GNC rejected nearly all of
 it), only an asked-for calibration estimates it from the rejected ones, taking their majority

@@ -13,8 +13,8 @@ GNC then runs again from the same start with every precision ``NARROWER`` times 
 its solution replaces the first where it has the lower TLS objective at the file's
 information (calibration then scales the information from there).
 
-Where GNC's first width was too narrow instead (it rejected true loops that the noise of
-what it kept explains, ``calibration``), the decisions that calibration settles from that run at the
+Where GNC's first width was too narrow instead (it rejected true loops that the noise of what
+it kept explains, ``calibration``), the decisions that calibration settles from that run at the
 wider width can stay bent around the true loops it rejected: GNC then runs anew from the start
 at the calibrated width, and its solution replaces the settled one where its TLS objective is
 lower."""
