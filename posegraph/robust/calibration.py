@@ -200,19 +200,23 @@ def _estimate(tests: MeasurementTests, inliers: np.ndarray, majority: bool = Tru
             bounds = np.sort(tests.limits[members] / tests.tested[members])
             allowed = max(1, int((1.0 - QUANTILE) * bounds.size))
             tail[kind] = float(bounds[allowed]) if bounds.size > allowed else np.inf
-    found = Estimate(median, tail, [], int(np.count_nonzero(gross & inliers)))
-    return _with_consistent(tests, inliers, telling, found)
+    return Estimate(
+        median,
+        tail,
+        tests.classes(inliers),
+        int(np.count_nonzero(gross & inliers)),
+        _consistent(tests, ~inliers & telling, median),
+    )
 
 
-def _with_consistent(tests, inliers, telling, found: Estimate) -> Estimate:
-    """``found`` with the inliers' noise consistency and the count of the measurements outside
-    them that pass the test under its median scales (``Estimate.consistent``; none without)."""
-    median, consistent = found.median, 0
-    if median:
-        pooled = dict.fromkeys(KINDS, min(median.values())) | median
-        passing = tests.tested * _by_measurement(tests, pooled) <= tests.limits
-        consistent = int(np.count_nonzero(passing & telling & ~inliers))
-    return dataclasses.replace(found, classes=tests.classes(inliers), consistent=consistent)
+def _consistent(tests: MeasurementTests, others: np.ndarray, median: dict[str, float]) -> int:
+    """How many of the ``others`` pass the test under the ``median`` scales
+    (``Estimate.consistent``; none without any)."""
+    if not median:
+        return 0
+    pooled = dict.fromkeys(KINDS, min(median.values())) | median
+    passing = tests.tested * _by_measurement(tests, pooled) <= tests.limits
+    return int(np.count_nonzero(passing & others))
 
 
 def _medians(tests: MeasurementTests, members: np.ndarray) -> dict[str, float]:
