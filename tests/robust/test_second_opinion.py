@@ -129,8 +129,9 @@ def test_gnc_anew_replaces_a_settled_solution_only_where_its_objective_is_lower(
 def test_calibration_runs_gnc_anew_where_consistent_rejections_set_it_off(
     problem, monkeypatch, lower
 ):
-    """``calibrate``'s check found rejections that the kept measurements' noise explains; once the scaling settles, GNC runs anew, and its result is taken
-    where ``anew`` gives one (its TLS objective was lower), counted as a solve."""
+    """``calibrate``'s check found rejections that the kept measurements' noise explains;
+    once the scaling settles, GNC runs anew, and its result is taken where ``anew`` gives one
+    (its TLS objective was lower), counted as a solve."""
     graph, _, _, solved, bent = problem
     kind = "loop closures"
     script = iter(
