@@ -1,7 +1,7 @@
 """Streaming a graph into a back end: warm starts against optimising every prefix from scratch.
 
 Usage: ``python -m posegraph.benchmarks.incremental [--step 100] [--graph w10000.graph]
-[--robust gnc --false-loops 0.1 --seed 0] [--gtsam]``.
+[--robust gnc --false-loops 0.1 --seed 0] [--gtsam | --isam2]``.
 The graph (by default gtsam's Data/w10000.graph) arrives ``step`` poses at a time: the new
 poses come without values, with every edge whose two ends have arrived, and
 a ``Smoother`` optimises after each step (warm start). The reference optimises each prefix as
@@ -12,7 +12,9 @@ loop closures (``posegraph_datasets.outliers``); the last calls' rejection rates
 With ``--gtsam``, the same stream also goes into gtsam, with default parameters
 (``gtsam_stream``): Levenberg-Marquardt over the whole graph from its last estimate after every
 step, as posegraph's warm start does, and iSAM2, updated once per step. Their times count
-gtsam's calls only.
+gtsam's calls only. ``--isam2`` streams into posegraph and iSAM2 alone, and compares each one's
+last error with one batch solve of the whole graph (no prefix is solved from scratch): the
+comparison a back end's user makes, in a time that streams of one pose per call allow.
 """
 
 from __future__ import annotations
@@ -76,48 +78,64 @@ _GTSAM_LABELS = {
 }
 
 
-def gtsam_stream(full: PoseGraph, step: int) -> dict[str, tuple[float, float]]:
-    """``full`` streamed (``stream``) into gtsam's Levenberg-Marquardt, re-optimising the whole
-    graph from its last estimate after every step, and into iSAM2, updated once per step (both
-    with gtsam's default parameters). New nodes start from each one's own estimate, composed
-    along a spanning tree (``spanning_tree_values``) as posegraph's warm start composes them;
-    the first node is held at its value. Returns per method (the seconds of each of its calls,
-    final error ½ Σ rᵀΩr)."""
+def gtsam_stream(
+    full: PoseGraph, step: int, methods: tuple[str, ...] = ("lm", "isam2")
+) -> dict[str, tuple[list[float], float, str | None]]:
+    """``full`` streamed (``stream``) into gtsam's Levenberg-Marquardt ("lm"), re-optimising the
+    whole graph from its last estimate after every step, and into iSAM2 ("isam2"), updated once
+    per step (both with gtsam's default parameters), those of ``methods``. New nodes start from
+    each one's own estimate, composed along a spanning tree (``spanning_tree_values``) as
+    posegraph's warm start composes them; the first node is held at its value. Returns per
+    method (the seconds of each of its calls, final error ½ Σ rᵀΩr, None), or where gtsam
+    raised (an indeterminate linear system), (the calls before, NaN, what it raised and where)."""
     import gtsam
 
     from ..validation import gtsam_bridge as bridge
 
     factors, isam = gtsam.NonlinearFactorGraph(), gtsam.ISAM2(gtsam.ISAM2Params())
-    estimates = {"lm": gtsam.Values(), "isam2": gtsam.Values()}
-    seconds: dict[str, list[float]] = {"lm": [], "isam2": []}
-    count, edges = 0, 0
-    for graph in stream(full, step):
+    estimates = {method: gtsam.Values() for method in methods}
+    seconds: dict[str, list[float]] = {method: [] for method in methods}
+    running, failures, count, edges = list(methods), {}, 0, 0
+    for k, graph in enumerate(stream(full, step)):
         new_nodes = np.arange(count, graph.num_nodes)
         new = bridge.between_factors(graph, np.arange(edges, graph.num_edges))
         if count == 0:
             new.push_back(bridge.held_priors(graph, np.arange(1), graph.values))
-        starts = {
-            method: bridge.values_to_gtsam(
-                graph,
-                new_nodes,
-                _composed(graph, bridge.values_from_gtsam(graph, values, count) if count else None),
-            )
-            for method, values in estimates.items()
-        }
         factors.push_back(new)
-        start = time.perf_counter()
-        estimates["lm"].insert(starts["lm"])
-        optimizer = gtsam.LevenbergMarquardtOptimizer(
-            factors, estimates["lm"], gtsam.LevenbergMarquardtParams()
-        )
-        estimates["lm"] = optimizer.optimize()
-        seconds["lm"].append(time.perf_counter() - start)
-        start = time.perf_counter()
-        isam.update(new, starts["isam2"])
-        estimates["isam2"] = isam.calculateEstimate()
-        seconds["isam2"].append(time.perf_counter() - start)
+        for method in list(running):
+            known = bridge.values_from_gtsam(graph, estimates[method], count) if count else None
+            start_values = bridge.values_to_gtsam(graph, new_nodes, _composed(graph, known))
+            start = time.perf_counter()
+            try:
+                estimates[method] = _gtsam_step(
+                    method, factors, new, estimates[method], start_values, isam
+                )
+            except RuntimeError as error:
+                message = " ".join(str(error).strip().split("\n\n")[0].split())
+                failures[method] = f"step {k + 1}: {message}"
+                running.remove(method)
+                continue
+            seconds[method].append(time.perf_counter() - start)
         count, edges = graph.num_nodes, graph.num_edges
-    return {method: (seconds[method], factors.error(estimates[method])) for method in seconds}
+    return {
+        method: (seconds[method], np.nan, failures[method])
+        if method in failures
+        else (seconds[method], factors.error(estimates[method]), None)
+        for method in methods
+    }
+
+
+def _gtsam_step(method: str, factors, new, estimate, start_values, isam):
+    """One step of ``method``, its new estimate: Levenberg-Marquardt over all ``factors`` from
+    ``estimate`` with the new nodes' ``start_values``, or iSAM2's update by the ``new`` factors."""
+    import gtsam
+
+    if method == "lm":
+        estimate.insert(start_values)
+        params = gtsam.LevenbergMarquardtParams()
+        return gtsam.LevenbergMarquardtOptimizer(factors, estimate, params).optimize()
+    isam.update(new, start_values)
+    return isam.calculateEstimate()
 
 
 def _composed(graph: PoseGraph, known: LieGroup | None) -> LieGroup:
@@ -184,16 +202,44 @@ def run(
     return "\n".join(lines)
 
 
-def _gtsam_lines(full: PoseGraph, step: int, warm_calls: list[float], optimum: float) -> list[str]:
-    """The report of the same stream into gtsam (``gtsam_stream``), beside posegraph's calls."""
+def run_against_isam2(path: Path, step: int) -> str:
+    """posegraph's ``Smoother`` and iSAM2 fed the same stream, side by side (``--isam2``): their
+    totals and per-call latencies, and their last errors against one batch solve's."""
+    full = load_graph(str(path)).graph
+    rows, warm_calls, _, _ = _streamed(full, step, None, scratch=False)
+    last, batch = rows[-1][1], optimize(full.copy()).summary.final_error
+    lines = [
+        f"{path.name}: {full.num_nodes} poses streamed in steps of {step} ({len(rows)} calls)",
+        f"  posegraph's Smoother: total {np.sum(warm_calls):.2f} s, per call"
+        f" {_latency(warm_calls)}, final error {last.final_error:.10g}"
+        f" ({(last.final_error - batch) / batch:+.1e} relative to a batch solve's {batch:.10g})",
+    ]
+    return "\n".join(lines + _gtsam_lines(full, step, warm_calls, batch, ("isam2",)))
+
+
+def _gtsam_lines(
+    full: PoseGraph,
+    step: int,
+    warm_calls: list[float],
+    optimum: float,
+    methods: tuple[str, ...] = ("lm", "isam2"),
+) -> list[str]:
+    """The report of the same stream into gtsam (``gtsam_stream``), beside posegraph's calls;
+    errors relative to ``optimum``."""
     lines = []
-    for method, (calls, error) in gtsam_stream(full, step).items():
+    for method, (calls, error, failure) in gtsam_stream(full, step, methods).items():
         seconds = float(np.sum(calls))
+        if failure is not None:
+            lines.append(
+                f"  gtsam {_GTSAM_LABELS[method]}: raised at {failure}"
+                f" ({seconds:.2f} s over the steps before)"
+            )
+            continue
         p99 = np.percentile(warm_calls, 99) / np.percentile(calls, 99)
         lines.append(
             f"  gtsam {_GTSAM_LABELS[method]}: total {seconds:.2f} s (posegraph's warm starts"
             f" take {np.sum(warm_calls) / seconds:.2f}×), final error {error:.10g}"
-            f" ({(error - optimum) / optimum:+.1e} relative to the scratch solution's);"
+            f" ({(error - optimum) / optimum:+.1e} relative to the reference solution's);"
             f" per call {_latency(calls)} (posegraph's p99 {p99:.2f}×)"
         )
     return lines
@@ -205,21 +251,23 @@ def _latency(calls: list[float]) -> str:
     return f"median {median:.2f} ms, p99 {p99:.2f} ms, max {largest:.2f} ms"
 
 
-def _streamed(full: PoseGraph, step: int, robust: str | None):
-    """The stream into one ``Smoother`` and, beside it, each prefix optimised from scratch: the
-    (nodes, warm summary, scratch summary) of every step, the seconds of each warm call, the
-    total time from scratch, and the graph."""
+def _streamed(full: PoseGraph, step: int, robust: str | None, scratch: bool = True):
+    """The stream into one ``Smoother`` and, beside it where ``scratch``, each prefix optimised
+    from scratch: the (nodes, warm summary, scratch summary or None) of every step, the seconds
+    of each warm call, the total time from scratch, and the graph."""
     warm_calls, scratch_total, rows, smoother = [], 0.0, [], None
     for graph in stream(full, step):
         smoother = smoother or Smoother(graph)
         start = time.perf_counter()
         warm = smoother.optimize(robust=robust)
         warm_calls.append(time.perf_counter() - start)
-        prefix = graph.copy()
-        start = time.perf_counter()
-        scratch = optimize(prefix, robust=robust)
-        scratch_total += time.perf_counter() - start
-        rows.append((graph.num_nodes, warm.summary, scratch.summary))
+        reference = None
+        if scratch:
+            prefix = graph.copy()
+            start = time.perf_counter()
+            reference = optimize(prefix, robust=robust).summary
+            scratch_total += time.perf_counter() - start
+        rows.append((graph.num_nodes, warm.summary, reference))
     return rows, warm_calls, scratch_total, graph
 
 
@@ -237,14 +285,23 @@ def main() -> None:
         "--false-loops", type=float, default=0.0, help="share of false loop closures to add"
     )
     parser.add_argument("--seed", type=int, default=0, help="of the false loops")
-    parser.add_argument(
+    peers = parser.add_mutually_exclusive_group()
+    peers.add_argument(
         "--gtsam", action="store_true", help="stream into gtsam LM and iSAM2 too, side by side"
+    )
+    peers.add_argument(
+        "--isam2",
+        action="store_true",
+        help="stream into posegraph and iSAM2 alone, the last errors against one batch solve",
     )
     args = parser.parse_args()
     path = Path(args.graph) if args.graph else benchmark_or_gtsam_graph("w10000.graph")
     if path is None:
         raise SystemExit("no graph given and gtsam's Data/ is not installed")
-    print(run(path, args.step, args.robust, args.false_loops, args.seed, args.gtsam))
+    if args.isam2:
+        print(run_against_isam2(path, args.step))
+    else:
+        print(run(path, args.step, args.robust, args.false_loops, args.seed, args.gtsam))
 
 
 if __name__ == "__main__":

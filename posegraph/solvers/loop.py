@@ -10,6 +10,9 @@ for Gauss-Newton, and updates λ by the gain ratio
 A rejected step costs a refactorisation and an evaluation of the residuals: the Jacobians
 are computed only at accepted values, and the linearisation is kept. The dogleg's rejected
 step costs the evaluation alone: its trust region shrinks about the same factorisation.
+After an accepted Gauss-Newton step, the factorisation that gave it is asked first: its Newton
+decrement ends the run, or its chord step finishes it, without factorising anew
+(``_after_newton_step``).
 
 Marquardt's D = diag(H) scales the damping with the curvature. A direction that no measurement
 reaches at first order (``posegraph.problem.observability``: the rotation of a pose seen only by
@@ -30,7 +33,7 @@ from ..graph import PoseGraph
 from ..problem.linear import NormalEquations
 from ..problem.linearization import EdgeWeighting, Linearized
 from .options import SolverOptions
-from .steps import STEPS
+from .steps import STEPS, Proposal
 from .summary import PHASES, IterationRecord, Result, Summary
 
 Callback = Callable[[IterationRecord], bool | None]
@@ -153,6 +156,7 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
     data, gradient, diagonal = _assemble(graph, system, current, clock)
     steps = STEPS[options.method](options, diagonal)
     fresh = True  # a linearisation not yet proposed from
+    chord = None  # the next step, from the last factorisation (``_after_newton_step``)
     # |x| of the step test, at the start: it changes little over a run, and a Log of every
     # node per iteration would cost as much as a linearisation on small graphs.
     size = float(np.linalg.norm(current.values.log()))
@@ -162,15 +166,11 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
         if stop is not None:
             termination, converged = stop
             break
-        proposal = steps.propose(graph, system, data, gradient, diagonal, fresh, clock)
-        fresh = False
-        if (
-            proposal.ok
-            and proposal.newton
-            and 0 <= proposal.predicted <= options.relative_decrease * current.error
-        ):
-            # A (near) Gauss-Newton step whose quadratic model promises less than the tolerance:
-            # stop without spending a linearisation on evaluating it.
+        proposal, stale, chord = chord, chord is not None, None
+        if not stale:
+            proposal = steps.propose(graph, system, data, gradient, diagonal, fresh, clock)
+            fresh = False
+        if _promises_little(options, proposal, current.error):
             termination, converged = PREDICTED_BELOW_TOLERANCE, True
             break
         trial = _trial(graph, system, weighting, current, proposal, clock)
@@ -179,7 +179,8 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
             trial is not None and np.isfinite(trial.error) and trial.error < current.error
         )
         decrease = current.error - trial.error if accepted else 0.0
-        steps.update(accepted, decrease, proposal)
+        if not stale:
+            steps.update(accepted, decrease, proposal)
         previous_error = current.error
         if accepted:
             current = trial
@@ -191,10 +192,10 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
             termination = STOPPED
             break
         small = step_norm < options.step_tolerance * (size + options.step_tolerance)
-        if not accepted:
-            stop = _stop_after_rejection(graph, system, steps, proposal, trial, small)
-        else:
+        if accepted:
             stop = _stop_after_acceptance(options, steps, proposal, decrease, previous_error, small)
+        elif not stale:  # after a rejected chord step, the linearisation is factorised
+            stop = _stop_after_rejection(graph, system, steps, proposal, trial, small)
         if stop is not None:
             termination, converged = stop
             break
@@ -202,9 +203,11 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
             continue
         data, gradient, diagonal = _assemble(graph, system, current, clock)
         fresh = True
-        if proposal.newton and _newton_decrement_small(options, system, gradient, current, clock):
-            termination, converged = PREDICTED_BELOW_TOLERANCE, True
-            break
+        if proposal.newton:
+            done, chord = _after_newton_step(options, system, gradient, current, decrease, clock)
+            if done:
+                termination, converged = PREDICTED_BELOW_TOLERANCE, True
+                break
     return current, termination, converged
 
 
@@ -251,10 +254,38 @@ def _stop_after_acceptance(options, steps, proposal, decrease, previous_error, s
     return None
 
 
-def _newton_decrement_small(options, system, gradient, current, clock) -> bool:
-    """Whether the Newton decrement ½ gᵀH⁻¹g at the new values, with H from the factorisation
-    just used (its change over a converging step is second order), promises less than the
-    tolerance: the run has then converged without a new factorisation."""
-    estimate = 0.5 * float(gradient @ system.solve(gradient))
+CHORD_MARGIN = 1e-3
+"""A chord step is taken where it is predicted to leave a Newton decrement below this share of
+the tolerance (``_after_newton_step``): as little as a Newton step would leave, not a linearly
+converging tail just under the tolerance."""
+
+
+def _after_newton_step(
+    options, system, gradient, current, decrease, clock
+) -> tuple[bool, Proposal | None]:
+    """After an accepted (near) Gauss-Newton step, what the factorisation just used says at the
+    new values, where H has changed by second order: (converged, next step). The run has
+    converged where the Newton decrement p = ½ gᵀH⁻¹g promises less than the tolerance t,
+    without a new factorisation. Near the optimum the decrement shrinks by q = p / (the step's
+    decrease) per step; where q·p ≤ ``CHORD_MARGIN``·t, δ = −H⁻¹g is the last step (the chord,
+    or simplified Newton, method: Kelley 2003, "Solving Nonlinear Equations with Newton's
+    Method", §2.3.3), at the cost of a solve, not of a factorisation."""
+    step = -system.solve(gradient)
     clock.lap("solve")
-    return 0 <= estimate <= options.relative_decrease * current.error
+    chord = Proposal(step, -0.5 * float(gradient @ step), True, False, True)
+    tolerance = options.relative_decrease * current.error
+    if _promises_little(options, chord, current.error):
+        return True, None
+    if 0 < chord.predicted**2 <= CHORD_MARGIN * tolerance * decrease and np.all(np.isfinite(step)):
+        return False, chord
+    return False, None
+
+
+def _promises_little(options: SolverOptions, proposal: Proposal, error: float) -> bool:
+    """Whether a (near) Gauss-Newton step's quadratic model promises less than the tolerance:
+    the run has converged, without spending a linearisation on evaluating the step."""
+    return (
+        proposal.ok
+        and proposal.newton
+        and 0 <= proposal.predicted <= options.relative_decrease * error
+    )

@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
+from posegraph_datasets import example
 from posegraph_datasets.generators import manhattan_world, sphere
 from posegraph_datasets.paths import BEST_KNOWN_ERROR
 
 import posegraph
-from posegraph.benchmarks.incremental import gtsam_stream, stream
+from posegraph.benchmarks.incremental import gtsam_stream, run_against_isam2, stream
 from posegraph.io import ReadOptions, load_graph, read_graph
 from posegraph.lie import SE2, SE3, Sim3
 from posegraph.problem.factors import linearize_between, linearize_priors
@@ -252,7 +255,20 @@ def test_a_stream_into_gtsam_ends_where_posegraph_warm_starts_end(world):
     assert theirs["lm"][1] == pytest.approx(ours, rel=1e-6)
     assert theirs["isam2"][1] >= ours * (1 - 1e-9)
     steps = -(-full.num_nodes // 40)
-    assert all(len(calls) == steps and min(calls) > 0 for calls, _ in theirs.values())
+    assert all(len(calls) == steps and min(calls) > 0 for calls, _, _ in theirs.values())
+    assert all(failure is None for _, _, failure in theirs.values())
+
+
+def test_the_isam2_pass_streams_into_isam2_alone_and_compares_with_a_batch_solve():
+    """``--isam2``: posegraph's stream and iSAM2's alone (no gtsam LM), each one's last error
+    against one batch solve of the whole graph; posegraph's warm starts end there (1e-6), and
+    iSAM2 no lower."""
+    report = run_against_isam2(example("sphere_small.g2o"), 20)
+    relative = r"\(([-+0-9.e]+) relative to (?:a batch solve's|the reference solution's)"
+    ours, theirs = (float(found) for found in re.findall(relative, report))
+    assert abs(ours) <= 1e-6 and theirs >= -1e-9
+    assert "iSAM2" in report and "Levenberg" not in report
+    assert "160 poses streamed in steps of 20 (8 calls)" in report
 
 
 def test_gnss_fixes_given_the_poses_rotations_reach_gtsams_position_only_optimum():
