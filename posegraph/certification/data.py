@@ -13,13 +13,16 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from typing import TYPE_CHECKING
 
 import numpy as np
-import scipy.sparse
 
 from ..graph import PoseGraph
 from ..lie import SE2, SE3
 from ..problem.cholesky import NotPositiveDefinite, make_cholesky
+
+if TYPE_CHECKING:
+    import scipy.sparse
 
 
 def precisions(group: type, information: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -72,6 +75,8 @@ class SESyncData:
         diagonal entry, as Q can be singular along the global rotation): it applies (Q + εI)⁻¹,
         SE-Sync's regularised Cholesky preconditioner. Factorised on first use: above rank d
         and for a failed check."""
+        import scipy.sparse  # on use: commands that do not certify do without scipy
+
         shift = np.r_[np.zeros(self.n - 1), np.full(self.d * self.n, 1e-6 * self.scale)]
         return _factorized(self.joint + scipy.sparse.diags(shift))
 
@@ -87,6 +92,8 @@ class SESyncData:
         """The Cholesky factor of ``joint`` less the block-diagonal B (``blocks``, (n, d, d))
         plus δI (δ = ``shift``) on the rotations, whose Schur complement on them is
         Q − B + δI; None where that matrix is not positive definite."""
+        import scipy.sparse
+
         d, n = self.d, self.n
         entries = n - 1 + np.arange(d * n).reshape(n, d)
         rows = np.broadcast_to(entries[:, :, None], (n, d, d)).ravel()
@@ -147,6 +154,8 @@ def require_certifiable(graph: PoseGraph) -> None:
 def sesync_data(graph: PoseGraph) -> SESyncData:
     """SE-Sync's problem of an SE2 or SE3 graph without priors, its edges' information reduced
     to κ and τ (``precisions``). The graph must be connected."""
+    import scipy.sparse
+
     require_certifiable(graph)
     group = graph.group
     d, n, edges = (2 if group is SE2 else 3), graph.num_nodes, graph.edges
@@ -191,6 +200,8 @@ def sesync_data(graph: PoseGraph) -> SESyncData:
 def _connection_laplacian(i, j, kappa: np.ndarray, rotation: np.ndarray, n: int):
     """L(G̃ρ), dn × dn: κ I on the diagonal blocks of both ends of each edge, −κ R̃ at (i, j)
     and −κ R̃ᵀ at (j, i) (SE-Sync eq. 13)."""
+    import scipy.sparse
+
     m, d = rotation.shape[0], rotation.shape[-1]
     block = np.arange(d)
     at_i, at_j = i[:, None, None] * d, j[:, None, None] * d
@@ -219,6 +230,8 @@ def _connection_laplacian(i, j, kappa: np.ndarray, rotation: np.ndarray, n: int)
 
 def _factorized(matrix) -> object:
     """A Cholesky factor (``problem.cholesky``) of a sparse positive definite matrix."""
+    import scipy.sparse
+
     matrix = scipy.sparse.csc_matrix(matrix)
     matrix.sort_indices()
     factor = make_cholesky(matrix.indices, matrix.indptr, matrix.shape[0])

@@ -7,12 +7,15 @@ from __future__ import annotations
 
 import dataclasses
 import warnings
+from typing import TYPE_CHECKING
 
 import numpy as np
-import scipy.sparse.linalg
 
 from .data import SESyncData
 from .stiefel import blocks, sym_block_products
+
+if TYPE_CHECKING:
+    import scipy.sparse.linalg
 
 EIGEN_TOLERANCE = 1e-5
 """Relative residual at which LOBPCG stops."""
@@ -39,6 +42,8 @@ def multipliers(data: SESyncData, y: np.ndarray) -> np.ndarray:
 
 def certificate_matrix(data: SESyncData, lam: np.ndarray) -> scipy.sparse.linalg.LinearOperator:
     """S = Q − Λ as an operator on dn-vectors and blocks of them (Λ's blocks ``lam``)."""
+    import scipy.sparse.linalg  # on use: commands that do not certify do without scipy
+
     d, size = data.d, data.d * data.n
 
     def apply(x: np.ndarray) -> np.ndarray:
@@ -76,6 +81,8 @@ def smallest_eigenpair(data: SESyncData, y: np.ndarray, s, seed: int = 0) -> Spe
     critical point S Yᵀ = 0, so the rows of Y span eigenvectors of eigenvalue 0, and the rest of
     the spectrum is found by LOBPCG (Knyazev 2001) on their orthogonal complement,
     preconditioned by ``SESyncData.precondition``, from seeded random vectors."""
+    import scipy.sparse.linalg
+
     size = s.shape[0]
     basis, on_values, on_vectors = _on_rows(s, y)
     preconditioner = scipy.sparse.linalg.LinearOperator(

@@ -11,6 +11,7 @@ from .checks import (
     overflowing_edges,
     start_information,
 )
+from .components import connected_components
 from .edges import EdgeSet, measurement_mask, renumbered
 from .pose_graph import POSE_GROUPS, PoseGraph
 from .topology import odometry_mask
@@ -19,6 +20,7 @@ __all__ = [
     "POSE_GROUPS",
     "EdgeSet",
     "PoseGraph",
+    "connected_components",
     "element_problems",
     "information_problems",
     "information_ranks",

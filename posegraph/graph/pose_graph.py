@@ -19,6 +19,7 @@ import numpy as np
 
 from ..lie import SE2, SE3, LieGroup, Sim3
 from .checks import as_elements, as_information, node_id_array, refuse_overflowing
+from .components import connected_components
 from .edges import EdgeSet, measurement_mask, renumbered
 
 POSE_GROUPS: tuple[type[LieGroup], ...] = (SE2, SE3, Sim3)
@@ -346,15 +347,11 @@ class PoseGraph:
     def components(self) -> np.ndarray:
         """Connected-component label of every node (edges of either direction connect); a
         read-only array, cached while the nodes and the edges' end arrays stay the same."""
-        from scipy.sparse import coo_matrix
-        from scipy.sparse.csgraph import connected_components
-
         n, i, j = self.num_nodes, self.edges.i, self.edges.j
         cached = self._components
         if cached is not None and cached[0] == n and cached[1] is i and cached[2] is j:
             return cached[3]
-        adjacency = coo_matrix((np.ones(i.size), (i, j)), (n, n))
-        labels = connected_components(adjacency, directed=False)[1]
+        labels = connected_components(n, i, j)
         labels.flags.writeable = False
         self._components = (n, i, j, labels)
         return labels

@@ -12,8 +12,6 @@ import dataclasses
 from collections.abc import Callable
 
 import numpy as np
-import scipy.sparse
-import scipy.sparse.csgraph
 
 from ..graph import PoseGraph, odometry_mask
 from ..lie import LieGroup
@@ -133,6 +131,8 @@ def spanning_tree(
 ) -> SpanningTree:
     """The minimum spanning tree of ``edge_weights`` (see ``SpanningTree``); ``known`` marks
     nodes hung from the root."""
+    import scipy.sparse.csgraph  # on use: an SE2 or SE3 chordal start does without scipy
+
     n = graph.num_nodes
     known = np.zeros(n, dtype=bool) if known is None else np.asarray(known, dtype=bool)
     i, j = graph.edges.i, graph.edges.j

@@ -15,10 +15,14 @@ eliminated before it nearly span.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import scipy.sparse
 
 from .selected_inversion import SupernodalFactor, inverse_blocks
+
+if TYPE_CHECKING:
+    import scipy.sparse
 
 SOLVED_COLUMNS = 96
 """CHOLMOD's covariance blocks of up to this many columns in all come from solves, beyond from
@@ -176,6 +180,8 @@ class CholmodCholesky:
     def _solved_blocks(self, groups: np.ndarray) -> np.ndarray:
         """Each block as Yᵀ D⁻¹ Y with Y = L⁻¹ P E_g (P A Pᵀ = L D Lᵀ, D = I for a supernodal
         factor): sparse solves with the unit columns, for a factor of either kind."""
+        import scipy.sparse  # on use: a solve with CHOLMOD does without scipy
+
         columns = groups.ravel()
         unit = self._spmatrix(
             1.0, columns.tolist(), list(range(columns.size)), (self.size, columns.size)
@@ -242,6 +248,8 @@ class ScipyCholesky:
         """Whether ``_lu`` factorises A[order][:, order] (else A, with its own ordering)."""
 
     def _matrix(self, data, indices, indptr) -> scipy.sparse.csc_matrix:
+        import scipy.sparse
+
         return scipy.sparse.csc_matrix((data, indices, indptr), shape=(self._size, self._size))
 
     def _fix_ordering(self, order: np.ndarray) -> None:

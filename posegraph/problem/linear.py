@@ -15,13 +15,17 @@ initialisation uses it with d = 2 or 3 for its linear systems.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import scipy.sparse
 
 from ..graph import PoseGraph
 from ..lie import LieGroup
 from .cholesky import NotPositiveDefinite, make_cholesky
 from .factors import Linearization, linearize_between, linearize_priors
+
+if TYPE_CHECKING:
+    import scipy.sparse
 
 RIDGES = (1e-12, 1e-9, 1e-6)
 """Relative ridges ε (H + ε diag(H)) that ``factorize_regularized`` tries, smallest first."""
@@ -272,6 +276,8 @@ class BlockPattern:
 
     def matrix(self, data: np.ndarray) -> scipy.sparse.csc_matrix:
         """The matrix as scipy CSC (for inspection and tests)."""
+        import scipy.sparse  # on use: a solve with CHOLMOD does without scipy
+
         return scipy.sparse.csc_matrix((data, self.indices, self.indptr), (self.size, self.size))
 
 

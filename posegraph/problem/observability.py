@@ -26,7 +26,6 @@ node or the prior.
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse
 
 from ..graph import PoseGraph, named_nodes, start_information
 from ..lie import LieGroup
@@ -62,11 +61,9 @@ def node_information(graph: PoseGraph) -> np.ndarray:
             priors.information,
         ]
     )
-    # Summed per node as a product with the (n, k) incidence matrix of the k blocks' nodes.
-    incidence = scipy.sparse.csr_matrix(
-        (np.ones(nodes.size), (nodes, np.arange(nodes.size))), (graph.num_nodes, nodes.size)
-    )
-    return (incidence @ blocks.reshape(-1, d * d)).reshape(-1, d, d)
+    summed = np.zeros((graph.num_nodes, d, d))
+    np.add.at(summed, nodes, blocks)
+    return summed
 
 
 def _unmeasured(eigenvalues: np.ndarray) -> np.ndarray:

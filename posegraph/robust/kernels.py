@@ -17,8 +17,11 @@ Zach 2014). ``width`` c is in units of the residual (s is compared with c²).
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
+
+from .chi_square import chi2_quantile
 
 KERNELS = ("huber", "cauchy", "geman-mcclure", "tukey", "dcs")
 
@@ -68,15 +71,8 @@ class RobustKernel:
 
 def default_width(dof: int, quantile: float = 0.99) -> float:
     """√χ²_dof(quantile): the residual size an inlier of ``dof`` dimensions exceeds with
-    probability 1 − quantile.
-
-    χ²_k is Gamma(k/2, scale 2), so its quantile is 2 P⁻¹(k/2, q) with P the regularised lower
-    incomplete gamma function (Abramowitz & Stegun §26.4). scipy.special serves it without
-    importing scipy.stats, and is imported on use, not with the command line.
-    """
-    from scipy.special import gammaincinv
-
-    return float(np.sqrt(2.0 * gammaincinv(0.5 * dof, quantile)))
+    probability 1 − quantile (``chi_square.chi2_quantile``)."""
+    return math.sqrt(chi2_quantile(dof, quantile))
 
 
 @dataclasses.dataclass(frozen=True)

@@ -39,7 +39,6 @@ import dataclasses
 import functools
 
 import numpy as np
-import scipy.linalg
 
 from ..graph import EdgeSet, PoseGraph
 from ..lie import LieGroup
@@ -234,6 +233,8 @@ class Leverage:
         in Stochastic Mapping Using the Joint Compatibility Test"). With C = I + A H⁻¹ Aᵀ =
         L Lᵀ, the k-th is ‖(L⁻¹ r̃)ₖ‖², one solve with H's factor of d columns per edge. All
         are ∞ where C or r̃ is not finite, or C not numerically positive definite."""
+        import scipy.linalg  # on use: the noise check of a summary does without scipy
+
         whitened, rows = _whitened(
             linearize_between(self.values, candidates), candidates.information
         )

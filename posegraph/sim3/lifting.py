@@ -5,8 +5,6 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-import scipy.sparse
-import scipy.sparse.csgraph
 
 from ..graph import PoseGraph
 from ..lie import SE3, Sim3
@@ -83,6 +81,8 @@ def loop_scale_sigma(
     ``loop_scales`` the loops' measured relative scales. Loops whose ends the lifted edges do
     not join, or whose scale is not a positive number, are left out, and at most
     ``LOOPS_SEARCHED`` loops are searched; None if no loop is left or none saw a change."""
+    import scipy.sparse.csgraph  # on use: only scale drift's loops need it
+
     edge_ends = np.asarray(edge_ends, np.int64).reshape(-1, 2)
     loop_ends = np.asarray(loop_ends, np.int64).reshape(-1, 2)
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -16,9 +16,6 @@ import dataclasses
 import time
 
 import numpy as np
-import scipy.linalg
-import scipy.sparse
-import scipy.sparse.linalg
 
 from ..graph import EdgeSet, PoseGraph
 from ..init.choice import choose, initialize
@@ -328,6 +325,9 @@ def _accept(window: _Window, delta: np.ndarray, free: np.ndarray) -> None:
 def _solve(hessian, gradient: np.ndarray, damping: float, current: np.ndarray) -> np.ndarray | None:
     """The tangents that minimise the model plus ½ λ ‖δ − current‖²: (H + λI) δ = g + λ current;
     None where H + λI is not numerically positive definite."""
+    import scipy.linalg  # on use: a start without a fixed-lag smoother does without scipy
+    import scipy.sparse.linalg
+
     rhs = gradient + damping * current
     if isinstance(hessian, np.ndarray):
         damped = hessian + damping * np.eye(gradient.size)

@@ -5,13 +5,16 @@ Matthies and Sukhatme 2010, "Sliding window filter", §3)."""
 from __future__ import annotations
 
 import dataclasses
+from typing import TYPE_CHECKING
 
 import numpy as np
-import scipy.sparse
 
 from ..graph import EdgeSet
 from ..lie import LieGroup
 from ..problem.factors import linearize_between, linearize_priors
+
+if TYPE_CHECKING:
+    import scipy.sparse
 
 DENSE_SIZE = 1500
 """Systems up to this many unknowns are held and solved dense, larger ones sparse."""
@@ -87,6 +90,8 @@ def quadratic(
 def _assembled(rows: np.ndarray, cols: np.ndarray, blocks: np.ndarray, n: int):
     """The n·d square matrix of (d, d) ``blocks`` summed at block ``rows`` and ``cols``: dense
     up to ``DENSE_SIZE`` unknowns, else sparse (CSR)."""
+    import scipy.sparse  # on use: a start without a fixed-lag smoother does without scipy
+
     d = blocks.shape[-1]
     if n * d <= DENSE_SIZE:
         dense = np.zeros((n * n, d, d))
@@ -129,6 +134,8 @@ def _blocks(residuals, jac_i, jac_j, edges: EdgeSet, position: np.ndarray):
 
 def _embedded(matrix: np.ndarray, at: np.ndarray, size: int) -> scipy.sparse.csr_matrix:
     """A dense square ``matrix`` placed at rows and columns ``at`` of a size × size matrix."""
+    import scipy.sparse
+
     rows = np.repeat(at, at.size)
     cols = np.tile(at, at.size)
     return scipy.sparse.coo_matrix((matrix.ravel(), (rows, cols)), shape=(size, size)).tocsr()

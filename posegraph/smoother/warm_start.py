@@ -7,10 +7,8 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
-from ..graph import PoseGraph, information_ranks, measured_dof
+from ..graph import PoseGraph, connected_components, information_ranks, measured_dof
 from ..init.choice import choose, initialize
 from ..init.spanning_tree import align_to_priors, spanning_tree_values
 from ..problem.cholesky import resolve_backend
@@ -160,22 +158,7 @@ def _hangs_a_tree(i: np.ndarray, j: np.ndarray, old: int, count: int) -> bool:
         return False
     # The old nodes become node 0, and new node k becomes k − old + 1.
     ends = np.maximum(np.stack([i, j]) - old + 1, 0)
-    if new <= DIRECT_COMPOSITION:  # a few streamed poses: union-find, without scipy's overhead
-        root = list(range(new + 1))
-
-        def find(node: int) -> int:
-            while root[node] != node:
-                node = root[node]
-            return node
-
-        for a, b in ends.T.tolist():
-            ra, rb = find(a), find(b)
-            if ra == rb:
-                return False  # a cycle: with one edge per new node, some node is then left out
-            root[ra] = rb
-        return True
-    adjacency = coo_matrix((np.ones(new), (ends[0], ends[1])), shape=(new + 1, new + 1))
-    return connected_components(adjacency, directed=False)[0] == 1
+    return bool(connected_components(new + 1, ends[0], ends[1]).max() == 0)
 
 
 def _agree_with_solution(graph: PoseGraph, solution: Solution) -> bool:
@@ -197,8 +180,7 @@ def _agree_with_solution(graph: PoseGraph, solution: Solution) -> bool:
 
 DIRECT_COMPOSITION = 64
 """At most this many new nodes, a few streamed poses, are composed one by one
-(``_compose_directly``) and tested as a tree by a union-find (``_hangs_a_tree``); more, as a
-whole new map, go along a spanning tree and through scipy's connected components."""
+(``_compose_directly``); more, as a whole new map, go along a spanning tree."""
 
 
 def compose_new_nodes(graph: PoseGraph, new: np.ndarray) -> None:

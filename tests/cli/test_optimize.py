@@ -57,20 +57,42 @@ def test_version_and_help():
         assert "examples:" in text and f"posegraph {command}" in text
 
 
-def test_start_up_leaves_plotting_and_statistics_unloaded():
-    """matplotlib and scipy.stats each add about 0.4 s to a start, scipy.special 0.05 s; only
-    plotting needs the first, only robust statistics the last."""
+def _modules_loaded_by(*arguments: str) -> set[str]:
+    """The modules that a ``posegraph`` process with ``arguments`` has loaded when it ends."""
     probe = (
         "import contextlib, io, sys, posegraph_cli.main\n"
         "with contextlib.suppress(SystemExit), contextlib.redirect_stdout(io.StringIO()):\n"
-        "    posegraph_cli.main.main(['--version'])\n"
+        f"    posegraph_cli.main.main({list(arguments)!r})\n"
         "print(' '.join(sorted(sys.modules)))"
     )
-    loaded = subprocess.run(
-        [sys.executable, "-c", probe], capture_output=True, text=True, check=True
-    ).stdout.split()
+    return set(
+        subprocess.run(
+            [sys.executable, "-c", probe], capture_output=True, text=True, check=True
+        ).stdout.split()
+    )
+
+
+def test_start_up_leaves_plotting_and_statistics_unloaded():
+    """matplotlib and scipy.stats each add about 0.4 s to a start, scipy.special 0.05 s; only
+    plotting needs the first, only robust statistics the last."""
+    loaded = _modules_loaded_by("--version")
     assert "posegraph.api" in loaded
-    assert not {"matplotlib", "scipy.stats", "scipy.special"} & set(loaded)
+    assert not {"matplotlib", "scipy.stats", "scipy.special"} & loaded
+
+
+@pytest.mark.parametrize("example", [EXAMPLE, EXAMPLE_2D])
+@pytest.mark.parametrize("shown", [[], ["-q"]])
+def test_an_optimisation_with_cholmod_never_imports_scipy(tmp_path, example, shown):
+    """Importing any of scipy's subpackages costs about 0.3 s (scipy 1.17's array-API layer
+    imports numpy.f2py and numpy.testing), a third of a quiet start on sphere2500: an SE2 or
+    SE3 optimisation with CHOLMOD, written to a file, with its summary (and noise check) or
+    quiet, does without it."""
+    pytest.importorskip("cvxopt")
+    output = str(tmp_path / "out.g2o")
+    loaded = _modules_loaded_by("optimize", str(example), "-o", output, *shown)
+    assert (tmp_path / "out.g2o").exists()
+    assert "posegraph.smoother.smoother" in loaded
+    assert not {name for name in loaded if name.split(".")[0] == "scipy"}
 
 
 def test_optimize_the_bundled_example(tmp_path):

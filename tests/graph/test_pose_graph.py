@@ -326,6 +326,29 @@ def test_components_follow_every_edit():
     assert not graph.components().flags.writeable
 
 
+def test_components_label_as_scipy_does():
+    """numpy's hooking and pointer jumping (``graph.components``) against scipy's
+    ``connected_components`` on random multigraphs with self-loops and isolated nodes, and on
+    chains numbered forwards, backwards and interleaved (the deepest trees to jump through)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components as scipy_components
+
+    from posegraph.graph import connected_components
+
+    rng = np.random.default_rng(0)
+    cases = []
+    for _ in range(200):
+        n = int(rng.integers(1, 200))
+        m = int(rng.integers(0, 2 * n))
+        cases.append((n, rng.integers(0, n, m), rng.integers(0, n, m)))
+    order = np.arange(3000)
+    for path in (order, order[::-1], np.concatenate([order[::2], order[1::2][::-1]])):
+        cases.append((order.size, path[:-1], path[1:]))
+    for n, i, j in cases:
+        expected = scipy_components(coo_matrix((np.ones(i.size), (i, j)), (n, n)), directed=False)
+        np.testing.assert_array_equal(connected_components(n, i, j), expected[1])
+
+
 def test_a_subgraph_keeps_its_nodes_in_order_with_the_edges_among_them():
     graph = random_graph(SE2, 10, 6, seed=79, priors=3)
     graph.fix(graph.node_ids[[4]])
