@@ -7,9 +7,11 @@ part of Σ = A⁻¹ = L⁻ᵀ L⁻¹ from C on is the inverse of the trailing pa
     U = L_RC L_CC⁻¹,   Σ_RC = −Σ_RR U,   Σ_CC = L_CC⁻ᵀ L_CC⁻¹ − Uᵀ Σ_RC
 
 (Takahashi, Fagan & Chen 1973; in supernodal form, Lin, Yang, Meza, Lu, Ying & E 2011, "SelInv",
-ACM TOMS 37(4)). Σ_RR lies in the pattern of the columns R, which are ancestors of C in the
-elimination tree, so the supernodes are swept from the root down, and the entries in chosen
-columns need only the supernodes on their paths to the root. The work is that of the numeric
+ACM TOMS 37(4)). R lies among the rows of C's parent supernode in the elimination tree (Liu
+1990, "The role of elimination trees in sparse factorization", SIAM J. Matrix Anal. Appl.
+11(1)), so Σ_RR is part of the parent's front Σ[rows, rows], kept, depth by depth, until its
+children have read it: each of R's rows is looked up once, not each entry. The supernodes are swept from the root down, and the entries in chosen columns
+need only the supernodes on their paths to the root. The work is that of the numeric
 factorisation; nothing of size n × n is formed. Supernodes at one depth of the tree do not
 depend on each other: those of one depth and shape are computed together, as stacks.
 """
@@ -93,30 +95,20 @@ def _lower_blocks(factor: SupernodalFactor, supernodes: np.ndarray, height: int,
     return np.where(row >= column, factor._data[index], 0.0)
 
 
-def _trailing_inverses(factor: SupernodalFactor, inverse: np.ndarray, rows: np.ndarray):
-    """Σ_RR (g, k, k) for the rows R (g, k) below supernodes of one shape, gathered from the
-    blocks of the ancestors that hold R's columns (already in ``inverse``). Entry (Rᵢ, Rⱼ),
-    i ≥ j, lies in the block of the supernode t holding Rⱼ, in its row Rᵢ; where Rᵢ lies among
-    t's rows is looked up once per run of R's columns that t holds."""
-    count, k = rows.shape
-    holder = factor.supernode_of[rows]  # (g, k), non-decreasing along k
-    run_start = np.maximum.accumulate(
-        np.where(np.diff(holder, axis=1, prepend=-1) != 0, np.arange(k), 0), axis=1
-    )
-    lower = np.tril(np.ones((k, k), dtype=bool))
-    looked_up = lower & (run_start[:, None, :] == np.arange(k))  # (g, i, j): j starts a run
-    g, i, j = np.nonzero(looked_up)
-    keys = holder[g, j] * factor.size + rows[g, i]
-    row_in_holder = np.zeros((count, k, k), dtype=np.int64)
-    row_in_holder[g, i, j] = (
-        np.searchsorted(factor._row_keys, keys) - factor._row_offset[holder[g, j]]
-    )
-    row_in_holder = np.take_along_axis(row_in_holder, run_start[:, None, :], axis=2)
-    width = factor.width[holder][:, None, :]
-    within = (rows - factor.first[holder])[:, None, :]
-    positions = factor.offset[holder][:, None, :] + row_in_holder * width + within
-    positions = np.where(lower, positions, np.swapaxes(positions, 1, 2))
-    return inverse[positions]
+def _fronts(factor: SupernodalFactor, needed: np.ndarray) -> tuple[np.ndarray, dict]:
+    """Where each parent among the ``needed`` supernodes keeps its front Σ[rows(s), rows(s)],
+    (height, height) row-major, in the flat buffer of its depth: the offsets (−1 for
+    supernodes that are no parent) and one empty buffer per depth."""
+    parent = factor.parent[needed]
+    parents = np.unique(parent[parent >= 0])
+    offsets = np.full(factor.first.size, -1)
+    buffers = {}
+    for depth in np.unique(factor.depth[parents]).tolist():
+        at = parents[factor.depth[parents] == depth]
+        sizes = factor.height[at] ** 2
+        offsets[at] = np.cumsum(sizes) - sizes
+        buffers[depth] = np.empty(int(sizes.sum()))
+    return offsets, buffers
 
 
 def selected_inverse(factor: SupernodalFactor, columns: np.ndarray) -> np.ndarray:
@@ -124,22 +116,40 @@ def selected_inverse(factor: SupernodalFactor, columns: np.ndarray) -> np.ndarra
     supernodes that hold ``columns`` and their ancestors; zero elsewhere."""
     inverse = np.zeros(factor.offset[-1])
     needed = factor.path_to_root(columns)
+    front_offsets, fronts = _fronts(factor, needed)
     shapes = np.stack([factor.depth[needed], factor.width[needed], factor.height[needed]])
     keys, group = np.unique(shapes, axis=1, return_inverse=True)
-    for index, (_, width, height) in enumerate(keys.T):  # by depth, from the root down
+    for index, (depth, width, height) in enumerate(keys.T):  # by depth, from the root down
         supernodes = needed[group.ravel() == index]
         lower = _lower_blocks(factor, supernodes, height, width)
         diagonal_inverse = np.linalg.inv(lower[:, :width])  # L_CC⁻¹
-        sigma = np.zeros((supernodes.size, height, width))
-        sigma[:, :width] = np.swapaxes(diagonal_inverse, 1, 2) @ diagonal_inverse
+        front = np.empty((supernodes.size, height, height))
+        front[:, :width, :width] = np.swapaxes(diagonal_inverse, 1, 2) @ diagonal_inverse
         if height > width:
+            parent = factor.parent[supernodes]
             first_entries = factor._indptr[factor.first[supernodes]]
             rows = factor._indices[first_entries[:, None] + np.arange(width, height)]
+            within = (
+                np.searchsorted(factor._row_keys, parent[:, None] * factor.size + rows)
+                - factor._row_offset[parent][:, None]
+            )  # where R's rows lie among the parent's
+            places = (
+                front_offsets[parent][:, None, None]
+                + within[:, :, None] * factor.height[parent][:, None, None]
+                + within[:, None, :]
+            )
+            front[:, width:, width:] = fronts[depth - 1][places]  # Σ_RR
             u = lower[:, width:] @ diagonal_inverse
-            sigma[:, width:] = -_trailing_inverses(factor, inverse, rows) @ u
-            sigma[:, :width] -= np.swapaxes(u, 1, 2) @ sigma[:, width:]
+            front[:, width:, :width] = -front[:, width:, width:] @ u  # Σ_RC
+            front[:, :width, :width] -= np.swapaxes(u, 1, 2) @ front[:, width:, :width]
+            front[:, :width, width:] = np.swapaxes(front[:, width:, :width], 1, 2)
         places = factor.offset[supernodes][:, None] + np.arange(height * width)
-        inverse[places] = sigma.reshape(supernodes.size, -1)
+        inverse[places] = front[:, :, :width].reshape(supernodes.size, -1)
+        kept = front_offsets[supernodes] >= 0
+        if kept.any():
+            places = front_offsets[supernodes[kept]][:, None] + np.arange(height * height)
+            fronts[depth][places] = front[kept].reshape(kept.sum(), -1)
+        fronts.pop(depth - 2, None)  # the grandparents' fronts have served their last children
     return inverse
 
 
@@ -147,6 +157,10 @@ def inverse_blocks(factor: SupernodalFactor, groups: np.ndarray) -> np.ndarray:
     """The blocks (L Lᵀ)⁻¹[g, g], (G, c, c), for G groups g of c column indices (G, c), every
     pair of which must lie in L's pattern (``ValueError`` otherwise)."""
     inverse = selected_inverse(factor, groups.ravel())
-    rows, columns = np.broadcast_arrays(groups[:, :, None], groups[:, None, :])
-    lower, upper = np.maximum(rows, columns).ravel(), np.minimum(rows, columns).ravel()
-    return inverse[factor.positions(lower, upper)].reshape(rows.shape)
+    count, size = groups.shape
+    a, b = np.tril_indices(size)  # a block is symmetric: its lower triangle is looked up
+    rows, columns = groups[:, a].ravel(), groups[:, b].ravel()
+    lower = inverse[factor.positions(np.maximum(rows, columns), np.minimum(rows, columns))]
+    blocks = np.empty((count, size, size))
+    blocks[:, a, b] = blocks[:, b, a] = lower.reshape(count, a.size)
+    return blocks
