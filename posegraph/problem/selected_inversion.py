@@ -10,10 +10,11 @@ part of Σ = A⁻¹ = L⁻ᵀ L⁻¹ from C on is the inverse of the trailing pa
 ACM TOMS 37(4)). R lies among the rows of C's parent supernode in the elimination tree (Liu
 1990, "The role of elimination trees in sparse factorization", SIAM J. Matrix Anal. Appl.
 11(1)), so Σ_RR is part of the parent's front Σ[rows, rows], kept, depth by depth, until its
-children have read it: each of R's rows is looked up once, not each entry. The supernodes are swept from the root down, and the entries in chosen columns
-need only the supernodes on their paths to the root. The work is that of the numeric
-factorisation; nothing of size n × n is formed. Supernodes at one depth of the tree do not
-depend on each other: those of one depth and shape are computed together, as stacks.
+children have read it: each of R's rows is looked up once, not each entry. The supernodes are
+swept from the root down, and the entries in chosen columns need only the supernodes on their
+paths to the root. The work is that of the numeric factorisation; nothing of size n × n is
+formed. Supernodes at one depth of the tree do not depend on each other: those of one depth and
+shape are computed together, as stacks.
 """
 
 from __future__ import annotations
