@@ -59,8 +59,9 @@ def regularized_gammas(a: float, x: float) -> tuple[float, float]:
 
 
 def chi2_quantile(dof: float, quantile: float) -> float:
-    """The ``quantile`` of χ² with ``dof`` degrees of freedom (0 at 0, ∞ at 1)."""
-    if quantile <= 0.0:
+    """The ``quantile`` of χ² with ``dof`` degrees of freedom (0 at 0, ∞ at 1; 0 for no
+    degrees of freedom, where χ² is 0)."""
+    if quantile <= 0.0 or dof <= 0:
         return 0.0
     if quantile >= 1.0:
         return math.inf

@@ -326,7 +326,6 @@ def _solve(hessian, gradient: np.ndarray, damping: float, current: np.ndarray) -
     """The tangents that minimise the model plus ½ λ ‖δ − current‖²: (H + λI) δ = g + λ current;
     None where H + λI is not numerically positive definite."""
     import scipy.linalg  # on use: a start without a fixed-lag smoother does without scipy
-    import scipy.sparse.linalg
 
     rhs = gradient + damping * current
     if isinstance(hessian, np.ndarray):
@@ -335,6 +334,8 @@ def _solve(hessian, gradient: np.ndarray, damping: float, current: np.ndarray) -
             return scipy.linalg.cho_solve(scipy.linalg.cho_factor(damped), rhs)
         except np.linalg.LinAlgError:
             return None
+    import scipy.sparse.linalg
+
     damped = (hessian + damping * scipy.sparse.identity(gradient.size)).tocsc()
     step = scipy.sparse.linalg.spsolve(damped, rhs)
     return step if np.isfinite(step).all() else None

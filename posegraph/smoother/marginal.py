@@ -90,13 +90,13 @@ def quadratic(
 def _assembled(rows: np.ndarray, cols: np.ndarray, blocks: np.ndarray, n: int):
     """The n·d square matrix of (d, d) ``blocks`` summed at block ``rows`` and ``cols``: dense
     up to ``DENSE_SIZE`` unknowns, else sparse (CSR)."""
-    import scipy.sparse  # on use: a start without a fixed-lag smoother does without scipy
-
     d = blocks.shape[-1]
     if n * d <= DENSE_SIZE:
         dense = np.zeros((n * n, d, d))
         np.add.at(dense, rows * n + cols, blocks)
         return dense.reshape(n, n, d, d).transpose(0, 2, 1, 3).reshape(n * d, n * d)
+    import scipy.sparse  # on use: dense windows do without it
+
     entry_rows = (rows[:, None, None] * d + np.arange(d)[:, None]).repeat(d, axis=2)
     entry_cols = (cols[:, None, None] * d + np.arange(d)[None, :]).repeat(d, axis=1)
     return scipy.sparse.coo_matrix(

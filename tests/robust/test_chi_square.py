@@ -26,6 +26,7 @@ def test_quantiles_equal_scipys_to_1e_11(dof):
 
 def test_the_ends_and_the_widths():
     assert chi2_quantile(3, 0.0) == 0.0 and chi2_quantile(3, 1.0) == math.inf
+    assert chi2_quantile(0, 0.99) == 0.0
     assert default_width(3, 0.999) == pytest.approx(math.sqrt(16.26623619623813), rel=1e-13)
     assert default_width(1, 0.99) == pytest.approx(2.5758293035489004, rel=1e-13)
 
