@@ -73,17 +73,21 @@ class SupernodalFactor:
                 s = self.parent[s]
         return np.flatnonzero(needed)
 
+    def rows_within(self, supernodes: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """Where each of ``rows`` lies among the rows of its supernode in ``supernodes``
+        (broadcast together), −1 where it is not one of them."""
+        keys = supernodes * self.size + rows
+        found = np.minimum(np.searchsorted(self._row_keys, keys), self._row_keys.size - 1)
+        return np.where(self._row_keys[found] == keys, found - self._row_offset[supernodes], -1)
+
     def positions(self, rows: np.ndarray, columns: np.ndarray) -> np.ndarray:
         """Positions in an inverse's buffer of entries (rows ≥ columns); ``ValueError`` if one
         is outside L's pattern."""
         s = self.supernode_of[columns]
-        keys = s * self.size + rows
-        found = np.minimum(np.searchsorted(self._row_keys, keys), self._row_keys.size - 1)
-        outside = self._row_keys[found] != keys
-        if np.any(outside):
-            k = int(np.flatnonzero(outside)[0])
+        row = self.rows_within(s, rows)
+        if np.any(row < 0):
+            k = int(np.flatnonzero(row < 0)[0])
             raise ValueError(f"entry ({rows[k]}, {columns[k]}) is outside the factor's pattern")
-        row = found - self._row_offset[s]
         return self.offset[s] + row * self.width[s] + columns - self.first[s]
 
 
@@ -130,10 +134,7 @@ def selected_inverse(factor: SupernodalFactor, columns: np.ndarray) -> np.ndarra
             parent = factor.parent[supernodes]
             first_entries = factor._indptr[factor.first[supernodes]]
             rows = factor._indices[first_entries[:, None] + np.arange(width, height)]
-            within = (
-                np.searchsorted(factor._row_keys, parent[:, None] * factor.size + rows)
-                - factor._row_offset[parent][:, None]
-            )  # where R's rows lie among the parent's
+            within = factor.rows_within(parent[:, None], rows)  # R among the parent's rows
             places = (
                 front_offsets[parent][:, None, None]
                 + within[:, :, None] * factor.height[parent][:, None, None]
