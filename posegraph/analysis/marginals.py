@@ -22,7 +22,8 @@ from ..graph import PoseGraph
 from ..lie import LieGroup
 from ..problem.cholesky import NotPositiveDefinite, covariance_by_solves
 from ..problem.covariance import joint_covariances
-from ..problem.linear import NormalEquations, factorize_information, factorized_information
+from ..problem.information import factorize_information, factorized_information
+from ..problem.linear import NormalEquations
 from ..problem.observability import SINGULAR, singular_information, undetermined_direction
 from ..smoother import Smoother
 

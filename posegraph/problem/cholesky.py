@@ -101,7 +101,7 @@ class CholmodCholesky:
     ) -> None:
         """``supernodal`` forces an LLᵀ factor (CHOLMOD may otherwise pick LDLᵀ), which
         ``covariance_blocks`` needs. ``previous`` is a factoriser for a leading part of this
-        pattern (see ``_lower_pattern``)."""
+        pattern, or for the same one (see ``_lower_pattern``)."""
         from cvxopt import cholmod, matrix, spmatrix
 
         self._cholmod, self._matrix, self._spmatrix = cholmod, matrix, spmatrix
@@ -138,6 +138,8 @@ class CholmodCholesky:
         old = (rows < n0) & (columns < n0)
         if not (0 < n0 <= size and np.count_nonzero(old) == previous._lower.size):
             return ones_at(rows, columns, (size, size))
+        if n0 == size:  # the same pattern: its matrix is shared (values are set per use)
+            return previous._a
         # ``sparse`` drops explicit zeros; previous's values are placeholders between
         # factorisations, so they are set to ones.
         previous._a.V = matrix(1.0, (previous._lower.size, 1))

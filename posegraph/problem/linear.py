@@ -15,14 +15,14 @@ initialisation uses it with d = 2 or 3 for its linear systems.
 
 from __future__ import annotations
 
+import copy
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..graph import PoseGraph
-from ..lie import LieGroup
 from .cholesky import NotPositiveDefinite, make_cholesky
-from .factors import Linearization, linearize_between, linearize_priors
+from .factors import Linearization
 
 if TYPE_CHECKING:
     import scipy.sparse
@@ -333,6 +333,25 @@ class NormalEquations(BlockPattern):
             previous,
         )
 
+    def describes(self, graph: PoseGraph, held: np.ndarray) -> bool:
+        """Whether these are the normal equations of ``graph``'s structure with ``held`` held."""
+        block_of = free_block_index(graph.num_nodes, held)
+        ends = [block_of[nodes] for nodes in (graph.edges.i, graph.edges.j, graph.priors.i)]
+        return (
+            block_of.size == self.block_of.size
+            and all(new.size == old.size for new, old in zip(ends, self._ends, strict=True))
+            and self._grows_into(block_of, *ends, graph.group.dof)
+        )
+
+    def for_covariance(self, backend: str) -> NormalEquations:
+        """These normal equations (their pattern and positions shared) with a factoriser of
+        their own, prepared for ``covariance_blocks`` of groups within the pattern."""
+        other = copy.copy(self)
+        other.cholesky = make_cholesky(
+            self.indices, self.indptr, self.size, backend, True, self.cholesky
+        )
+        return other
+
     def assemble(
         self,
         between: Linearization,
@@ -360,32 +379,3 @@ def _normal_terms(
     jt_omega = np.swapaxes(jacobians, 1, 2) @ information
     np.matmul(jt_omega, jacobians, out=blocks.reshape(count, width, width))
     np.matmul(jt_omega, linearization.residuals[:, :, None], out=pieces.reshape(count, width, 1))
-
-
-def factorized_information(
-    graph: PoseGraph,
-    values: LieGroup,
-    system: NormalEquations,
-    regularize: bool = False,
-    least_share: float = 0.0,
-) -> Linearization:
-    """The information matrix H = Σ Jᵀ Ω J of ``graph`` at ``values`` (priors included, gauge
-    nodes held), assembled into ``system`` (normal equations of this graph's structure) and
-    factorised by ``factorize_information``; returns the between edges' linearisation."""
-    between = linearize_between(values, graph.edges)
-    priors = linearize_priors(values, graph.priors)
-    data, _ = system.assemble(between, graph.edges.information, priors, graph.priors.information)
-    factorize_information(system, data, regularize, least_share)
-    return between
-
-
-def factorize_information(
-    system: NormalEquations, data: np.ndarray, regularize: bool = False, least_share: float = 0.0
-) -> None:
-    """Factorise H (its CSC ``data`` in ``system``), with ``regularize`` by
-    ``factorize_regularized``. With ``least_share``, a pivot of at most that share of its
-    diagonal entry (``NormalEquations.pivot_shares``: H singular to working precision, which
-    one backend may factorise where another fails) raises ``NotPositiveDefinite`` too."""
-    (system.factorize_regularized if regularize else system.factorize)(data)
-    if least_share and system.size and system.pivot_shares(data).min() <= least_share:
-        raise NotPositiveDefinite(f"a pivot of at most {least_share:g} of its diagonal entry")

@@ -125,6 +125,7 @@ def estimate(
     edge_inliers: np.ndarray | None = None,
     prior_inliers: np.ndarray | None = None,
     majority: bool = True,
+    solved: Result | None = None,
 ) -> Estimate:
     """The estimate at ``values``, a least-squares solution over the given inliers (by default
     every measurement, of which those that pass Baarda's test under their class's scale are
@@ -132,9 +133,10 @@ def estimate(
     solution (a prior's by its s) and count in the tail scales, so that true ones of a heavy
     tail, rejected under a scale that was too large, pull it back. ``majority``: a class whose
     inliers tell nothing of its noise takes the majority of its others as true (``_estimate``);
-    without it, such a class has no scale."""
+    without it, such a class has no scale. ``solved``, the solve that ended at ``values``,
+    lends its normal equations where they are those of the inliers."""
     if edge_inliers is None:
-        tests = measurement_tests(graph, values)
+        tests = measurement_tests(graph, values, solved)
         inliers = np.ones(tests.kinds.size, dtype=bool)
         found = _estimate(tests, inliers)
         for _ in range(INLIER_PASSES):
@@ -145,14 +147,16 @@ def estimate(
             found = _estimate(tests, inliers)
         return found
     work = _inliers(graph, edge_inliers, prior_inliers)
-    tests = _with_left_out(graph, work, values, edge_inliers, prior_inliers)
+    tests = _with_left_out(graph, work, values, edge_inliers, prior_inliers, solved)
     inliers = np.arange(tests.kinds.size) < work.num_edges + len(work.priors)
     return _estimate(tests, inliers, majority)
 
 
-def _with_left_out(graph, work, values, edge_inliers, prior_inliers) -> MeasurementTests:
+def _with_left_out(
+    graph, work, values, edge_inliers, prior_inliers, solved=None
+) -> MeasurementTests:
     """The tests of ``work`` (the inliers), then those of the edges and priors left out."""
-    tests = measurement_tests(work, values)
+    tests = measurement_tests(work, values, solved)
     out_edges = graph.edges.subset(~edge_inliers)
     out_priors = graph.priors.subset(~prior_inliers)
     if not len(out_edges) and not len(out_priors):
@@ -329,7 +333,7 @@ def _estimate_at(
     has no covariance to test with."""
     inliers = kept(graph, result) if robust else (None, None)
     try:
-        return estimate(graph, result.values, *inliers, majority=not automatic)
+        return estimate(graph, result.values, *inliers, majority=not automatic, solved=result)
     except (NotPositiveDefinite, np.linalg.LinAlgError):
         return None
 
@@ -372,7 +376,7 @@ def kept(graph: PoseGraph, result: Result) -> tuple[np.ndarray, np.ndarray]:
 
 def kept_noise(graph: PoseGraph, result: Result) -> list[NoiseClass]:
     """The noise consistency of the measurements that a solve kept, at its solution."""
-    return noise_consistency(_inliers(graph, *kept(graph, result)), result.values)
+    return noise_consistency(_inliers(graph, *kept(graph, result)), result.values, result)
 
 
 def _inliers(graph: PoseGraph, edges: np.ndarray, priors: np.ndarray) -> PoseGraph:

@@ -45,7 +45,9 @@ from ..lie import LieGroup
 from ..problem.cholesky import inverts_selectively
 from ..problem.covariance import joint_covariances
 from ..problem.factors import Linearization, information_root, linearize_between, linearize_priors
-from ..problem.linear import NormalEquations, factorized_information
+from ..problem.information import factorize_information, factorized_information
+from ..problem.linear import NormalEquations
+from ..solvers import Result
 
 PROBES = 256
 """Probes of the estimates, and the widest solve for exact innovations. At 32 a leverage of 0.7
@@ -133,9 +135,24 @@ def _factorize(
     values: LieGroup,
     linear_solver: str,
     covariance_of: np.ndarray | None = None,
+    solved: Result | None = None,
 ) -> _Factored:
-    system = NormalEquations(graph, graph.gauge_nodes(), linear_solver, covariance_of)
-    between = factorized_information(graph, values, system, regularize=True)
+    """H factorised at ``values``. ``solved``, a least-squares solve of this graph ending at
+    ``values``, lends its pattern (where ``covariance_of`` lies within it: the groups are
+    edges' ends) and, if it assembled H there, H and the Jacobians."""
+    held = graph.gauge_nodes()
+    lent = solved is not None and solved.system is not None and solved.system.describes(graph, held)
+    if not lent:
+        system = NormalEquations(graph, held, linear_solver, covariance_of)
+        between = factorized_information(graph, values, system, regularize=True)
+    else:
+        system = solved.system.for_covariance(linear_solver)
+        data = solved.linearization.normal_matrix_for(graph, values)
+        if data is None:
+            between = factorized_information(graph, values, system, regularize=True)
+        else:
+            factorize_information(system, data, regularize=True)
+            between = solved.linearization.between
     prior_rows = (
         information_root(graph.priors.information) @ linearize_priors(values, graph.priors).jac_j
     )
@@ -265,12 +282,14 @@ def deleted_residuals(
     values: LieGroup,
     edges: np.ndarray | None = None,
     linear_solver: str = "auto",
+    solved: Result | None = None,
 ) -> DeletedResiduals:
     """Exact deleted residuals at ``values`` (see the module docstring) of the between edges
-    indexed by ``edges``, by default all."""
+    indexed by ``edges``, by default all; ``solved``, the least-squares solve that ended at
+    ``values``, lends its normal equations (``_factorize``)."""
     edges = np.arange(graph.num_edges) if edges is None else np.asarray(edges, dtype=np.int64)
     ends = np.stack([graph.edges.i[edges], graph.edges.j[edges]], axis=1)
-    factored = _factorize(graph, values, linear_solver, covariance_of=ends)
+    factored = _factorize(graph, values, linear_solver, ends, solved)
     covariances = joint_covariances(factored.system, ends)
     rows = factored.rows[edges]
     hat = rows @ covariances @ np.swapaxes(rows, 1, 2)  # Aₑ H⁻¹ Aₑᵀ

@@ -14,6 +14,7 @@ from ..graph import PoseGraph, odometry_mask
 from ..graph.checks import information_ranks
 from ..lie import LieGroup
 from ..problem.factors import between_squares, prior_squares
+from ..solvers import Result
 from .kernels import default_width
 from .leverage import deleted_residuals
 
@@ -123,14 +124,17 @@ class MeasurementTests:
         return classes
 
 
-def measurement_tests(graph: PoseGraph, values: LieGroup) -> MeasurementTests:
-    """The tests of the graph's measurements at ``values``, a least-squares solution."""
+def measurement_tests(
+    graph: PoseGraph, values: LieGroup, solved: Result | None = None
+) -> MeasurementTests:
+    """The tests of the graph's measurements at ``values``, a least-squares solution (that of
+    ``solved``, if given: its normal equations are reused, ``leverage.deleted_residuals``)."""
     edge_ranks = information_ranks(graph.edges.information)
     prior_ranks = information_ranks(graph.priors.information)
     prior_s = prior_squares(values, graph.priors)
     edge_s, redundancy, innovation = np.zeros(0), np.zeros(0), np.zeros(0)
     if graph.num_edges:
-        deleted = deleted_residuals(graph, values)
+        deleted = deleted_residuals(graph, values, solved=solved)
         unmeasured = graph.group.dof - edge_ranks  # directions I − Mₑₑ counts as 1 that s lacks
         edge_s = between_squares(values, graph.edges)
         redundancy = np.maximum(deleted.redundancy - unmeasured, 0.0)
@@ -153,8 +157,10 @@ def limits(ranks: np.ndarray) -> np.ndarray:
     return np.array(of_distinct, dtype=float)[index.reshape(np.shape(ranks))]
 
 
-def noise_consistency(graph: PoseGraph, values: LieGroup) -> list[NoiseClass]:
-    """The classes of the graph's measurements at ``values``, a least-squares solution:
-    odometry, loop closures, priors (whose redundancy is taken as their rank; the test is on s).
-    Classes without measurements are left out."""
-    return measurement_tests(graph, values).classes()
+def noise_consistency(
+    graph: PoseGraph, values: LieGroup, solved: Result | None = None
+) -> list[NoiseClass]:
+    """The classes of the graph's measurements at ``values``, a least-squares solution (that of
+    ``solved``, if given): odometry, loop closures, priors (whose redundancy is taken as their
+    rank; the test is on s). Classes without measurements are left out."""
+    return measurement_tests(graph, values, solved).classes()

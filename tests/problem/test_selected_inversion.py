@@ -8,7 +8,13 @@ import pytest
 import scipy.sparse
 
 from posegraph.problem.cholesky import available_backends, make_cholesky
-from posegraph.problem.selected_inversion import SupernodalFactor, inverse_blocks, selected_inverse
+from posegraph.problem.selected_inversion import (
+    TRIANGULAR_LEAF,
+    SupernodalFactor,
+    _triangular_inverse,
+    inverse_blocks,
+    selected_inverse,
+)
 
 
 def _sparse_spd(size: int, seed: int) -> np.ndarray:
@@ -45,6 +51,40 @@ def test_selected_inverse_is_the_inverse_in_the_factors_pattern():
         columns = np.arange(factor.first[s], factor.first[s] + factor.width[s])
         expected = inverse[np.ix_(factor.rows(s), columns)]
         np.testing.assert_allclose(factor.block(computed, s), expected, rtol=1e-10, atol=1e-13)
+
+
+@pytest.mark.parametrize(
+    "width", [1, TRIANGULAR_LEAF, TRIANGULAR_LEAF + 1, 3 * TRIANGULAR_LEAF + 7]
+)
+def test_triangular_inverse_by_halves_is_the_inverse(width):
+    """Stacked lower-triangular matrices, as wide as numpy's LU inverse takes them and wider
+    (by halves, twice): their inverses, lower-triangular."""
+    rng = np.random.default_rng(width)
+    lower = np.tril(rng.normal(size=(3, width, width))) + 2 * width * np.eye(width)
+    inverse = _triangular_inverse(lower)
+    np.testing.assert_allclose(
+        inverse @ lower, np.broadcast_to(np.eye(width), lower.shape), atol=1e-13
+    )
+    assert np.all(np.triu(inverse, 1) == 0)
+
+
+def test_a_wide_supernode_and_many_narrow_ones():
+    """A graph whose last 70 nodes are all coupled (a root supernode wider than
+    ``TRIANGULAR_LEAF``) and a long chain (many narrow supernodes of one shape, written by one
+    scatter): the inverse in the factor's pattern."""
+    matrix = _sparse_spd(600, seed=4)
+    coupled = np.arange(390, 600)
+    rng = np.random.default_rng(4)
+    root = rng.normal(size=(coupled.size, coupled.size))
+    matrix[np.ix_(coupled, coupled)] += root @ root.T / coupled.size
+    factor = _factor(matrix)
+    assert factor.width.max() > TRIANGULAR_LEAF
+    inverse = np.linalg.inv(matrix)
+    computed = selected_inverse(factor, np.arange(600))
+    for s in range(factor.first.size):
+        columns = np.arange(factor.first[s], factor.first[s] + factor.width[s])
+        expected = inverse[np.ix_(factor.rows(s), columns)]
+        np.testing.assert_allclose(factor.block(computed, s), expected, rtol=1e-9, atol=1e-13)
 
 
 def test_blocks_of_chosen_columns_need_only_their_paths_to_the_root():

@@ -13,6 +13,7 @@ from posegraph.graph import odometry_mask
 from posegraph.lie import SE3
 from posegraph.problem.cholesky import available_backends
 from posegraph.problem.factors import between_squares
+from posegraph.robust import leverage
 from posegraph.robust.leverage import Leverage, deleted_residuals, innovations
 from posegraph.solvers import SolverOptions, solve
 
@@ -73,6 +74,28 @@ def test_exact_deleted_residuals_of_all_edges_at_once_equal_each_alone(backend):
         alone = deleted_residuals(graph, solution.values, edges=[edge], linear_solver=backend)
         assert every.innovation[edge] == pytest.approx(alone.innovation[0], rel=1e-9)
         assert every.squares[edge] == pytest.approx(alone.squares[0], rel=1e-9)
+
+
+@on_graphs
+def test_a_solve_lends_its_normal_equations_to_the_deleted_residuals_at_its_solution(
+    make_graph, backend, monkeypatch
+):
+    """Given the solve that ended at the values, the deleted residuals reuse its pattern, H and
+    Jacobians (no new normal equations are built) and equal those computed anew; a solve of
+    another structure lends nothing."""
+    graph = make_graph()
+    solution = solve(graph, SolverOptions(linear_solver=backend))
+    anew = deleted_residuals(graph, solution.values, linear_solver=backend)
+    with monkeypatch.context() as patched:
+        patched.setattr(leverage, "NormalEquations", None)  # building one would raise
+        lent = deleted_residuals(graph, solution.values, linear_solver=backend, solved=solution)
+    np.testing.assert_allclose(lent.innovation, anew.innovation, rtol=1e-9)
+    np.testing.assert_allclose(lent.squares, anew.squares, rtol=1e-9)
+    np.testing.assert_allclose(lent.redundancy, anew.redundancy, rtol=1e-9, atol=1e-12)
+    fewer = graph.with_edges(np.arange(graph.num_edges) != _loops(graph)[0])
+    other = deleted_residuals(fewer, solution.values, linear_solver=backend, solved=solution)
+    alone = deleted_residuals(fewer, solution.values, linear_solver=backend)
+    np.testing.assert_allclose(other.innovation, alone.innovation, rtol=1e-9)
 
 
 @on_graphs
