@@ -142,17 +142,16 @@ def _factorize(
     edges' ends) and, if it assembled H there, H and the Jacobians."""
     held = graph.gauge_nodes()
     lent = solved is not None and solved.system is not None and solved.system.describes(graph, held)
-    if not lent:
-        system = NormalEquations(graph, held, linear_solver, covariance_of)
-        between = factorized_information(graph, values, system, regularize=True)
-    else:
+    if lent:
         system = solved.system.for_covariance(linear_solver)
         data = solved.linearization.normal_matrix_for(graph, values)
-        if data is None:
-            between = factorized_information(graph, values, system, regularize=True)
-        else:
-            factorize_information(system, data, regularize=True)
-            between = solved.linearization.between
+    else:
+        system, data = NormalEquations(graph, held, linear_solver, covariance_of), None
+    if data is None:
+        between = factorized_information(graph, values, system, regularize=True)
+    else:
+        factorize_information(system, data, regularize=True)
+        between = solved.linearization.between
     prior_rows = (
         information_root(graph.priors.information) @ linearize_priors(values, graph.priors).jac_j
     )
