@@ -29,11 +29,11 @@ from posegraph_datasets.paths import benchmark_or_gtsam_graph
 
 from ..api import optimize
 from ..graph import PoseGraph
-from ..init.spanning_tree import spanning_tree_values
 from ..io import load_graph
 from ..lie import LieGroup
 from ..robust.run import DECISIONS_AS_START
 from ..smoother import COMPOSED, RESTART, Smoother
+from ..smoother.warm_start import compose_new_nodes
 from ..solvers import Summary
 from .timing import at_least
 
@@ -84,8 +84,8 @@ def gtsam_stream(
     """``full`` streamed (``stream``) into gtsam's Levenberg-Marquardt ("lm"), re-optimising the
     whole graph from its last estimate after every step, and into iSAM2 ("isam2"), updated once
     per step (both with gtsam's default parameters), those of ``methods``. New nodes start from
-    each one's own estimate, composed along a spanning tree (``spanning_tree_values``) as
-    posegraph's warm start composes them; the first node is held at its value. Returns per
+    each one's own estimate, composed as posegraph's warm start composes them (``_composed``);
+    the first node is held at its value. Returns per
     method (the seconds of each of its calls, final error ½ Σ rᵀΩr, None), or where gtsam
     raised (an indeterminate linear system), (the calls before, NaN, what it raised and where)."""
     import gtsam
@@ -103,8 +103,8 @@ def gtsam_stream(
             new.push_back(bridge.held_priors(graph, np.arange(1), graph.values))
         factors.push_back(new)
         for method in list(running):
-            known = bridge.values_from_gtsam(graph, estimates[method], count) if count else None
-            start_values = bridge.values_to_gtsam(graph, new_nodes, _composed(graph, known))
+            values = _composed(graph, estimates[method], count)
+            start_values = bridge.values_to_gtsam(graph, new_nodes, values)
             start = time.perf_counter()
             try:
                 estimates[method] = _gtsam_step(
@@ -138,14 +138,22 @@ def _gtsam_step(method: str, factors, new, estimate, start_values, isam):
     return isam.calculateEstimate()
 
 
-def _composed(graph: PoseGraph, known: LieGroup | None) -> LieGroup:
-    """Values of every node: ``known`` for the first nodes (None: the first node's own value),
-    the others composed from them along a spanning tree."""
-    count = 1 if known is None else len(known)
-    scratch = graph.copy()
-    if known is not None:
-        scratch.set_values(graph.values.set_at(np.arange(count), known), check=False)
-    return spanning_tree_values(scratch, np.arange(graph.num_nodes) < count)
+def _composed(graph: PoseGraph, estimate, count: int) -> LieGroup:
+    """Values of every node of a step of gtsam's stream (set in ``graph``, the stream's own):
+    the new nodes, from the ``count``-th on, composed as posegraph's warm start composes them
+    (``compose_new_nodes``) from gtsam's ``estimate`` of the old nodes that their edges reach
+    (at the first step, from the first node's own value)."""
+    from ..validation import gtsam_bridge as bridge
+
+    if count:
+        edges = graph.edges
+        new = (edges.i >= count) | (edges.j >= count)
+        ends = np.concatenate([edges.i[new], edges.j[new]])
+        reached = np.unique(ends[ends < count])
+        known = bridge.values_from_gtsam(graph, estimate, reached)
+        graph.set_values(graph.values.set_at(reached, known), check=False)
+    compose_new_nodes(graph, np.arange(graph.num_nodes) >= max(count, 1))
+    return graph.values
 
 
 def run(

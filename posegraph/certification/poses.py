@@ -13,7 +13,8 @@ import numpy as np
 
 from ..lie._coeffs import hat3
 from ..problem.cholesky import NotPositiveDefinite
-from ..problem.linear import BlockPattern, free_block_index
+from ..problem.linear import BlockPattern
+from ..problem.pattern import free_block_index
 from .data import SESyncData
 from .stiefel import blocks, joined
 

@@ -32,7 +32,8 @@ import numpy as np
 from ..graph import PoseGraph
 from ..lie import SE2, SE3, LieGroup, Sim3
 from ..lie.so3 import project_to_rotation
-from ..problem.linear import BlockPattern, free_block_index
+from ..problem.linear import BlockPattern
+from ..problem.pattern import free_block_index
 from .spanning_tree import spanning_tree
 
 

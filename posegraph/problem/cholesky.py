@@ -15,6 +15,7 @@ eliminated before it nearly span.
 
 from __future__ import annotations
 
+import dataclasses
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -81,6 +82,16 @@ def ones_at(rows: np.ndarray, columns: np.ndarray, shape: tuple[int, int]):
     )
 
 
+@dataclasses.dataclass(frozen=True)
+class Appended:
+    """How a symmetric CSC pattern extends an earlier one whose rows and columns it keeps first:
+    each earlier entry's position now (``relocated``), and the positions of the entries
+    inserted, sorted, each in a row or column past the earlier size."""
+
+    relocated: np.ndarray
+    inserted: np.ndarray
+
+
 class NotPositiveDefinite(ArithmeticError):
     """The matrix could not be factorised (not positive definite, or singular)."""
 
@@ -98,20 +109,30 @@ class CholmodCholesky:
         size: int,
         supernodal: bool = False,
         previous: CholmodCholesky | None = None,
+        appended: Appended | None = None,
     ) -> None:
         """``supernodal`` forces an LLᵀ factor (CHOLMOD may otherwise pick LDLᵀ), which
         ``covariance_blocks`` needs. ``previous`` is a factoriser for a leading part of this
-        pattern, or for the same one (see ``_lower_pattern``)."""
+        pattern, or for the same one (see ``_lower_pattern``); ``appended`` says how this
+        pattern extends it, where known."""
         from cvxopt import cholmod, matrix, spmatrix
 
         self._cholmod, self._matrix, self._spmatrix = cholmod, matrix, spmatrix
         self.size = size
         self._supernodal = supernodal
-        columns = np.repeat(np.arange(size), np.diff(indptr))
         # CHOLMOD reads the lower triangle only (uplo="L"): passing just that halves the
         # triplets cvxopt sorts into its matrix and the values copied per factorisation.
-        self._lower = np.flatnonzero(indices >= columns)
-        self._a = self._lower_pattern(indices[self._lower], columns[self._lower], previous)
+        if previous is not None and appended is not None:
+            columns = np.searchsorted(indptr, appended.inserted, side="right") - 1
+            rows = indices[appended.inserted]
+            lower = rows >= columns
+            added, kept = appended.inserted[lower], appended.relocated[previous._lower]
+            self._lower = np.insert(kept, np.searchsorted(kept, added), added)
+            self._a = self._extended_pattern(rows[lower], columns[lower], previous)
+        else:
+            columns = np.repeat(np.arange(size), np.diff(indptr))
+            self._lower = np.flatnonzero(indices >= columns)
+            self._a = self._lower_pattern(indices[self._lower], columns[self._lower], previous)
         self._factor = self._analyse()
 
     def _analyse(self):
@@ -131,19 +152,25 @@ class CholmodCholesky:
         leading n₀ × n₀ part unchanged (a graph that grew by appended nodes and edges between
         them or to old nodes), the new rows and columns are concatenated to it, which skips
         cvxopt's triplet sort of the whole pattern."""
-        from cvxopt import sparse
-
-        size, matrix = self.size, self._matrix
+        size = self.size
         n0 = previous.size if previous is not None else 0
         old = (rows < n0) & (columns < n0)
         if not (0 < n0 <= size and np.count_nonzero(old) == previous._lower.size):
             return ones_at(rows, columns, (size, size))
+        return self._extended_pattern(rows[~old], columns[~old], previous)
+
+    def _extended_pattern(self, rows: np.ndarray, columns: np.ndarray, previous):
+        """The cvxopt lower-triangle pattern of ``previous``'s with the entries (``rows``,
+        ``columns``) added, each in a row or column past its size."""
+        from cvxopt import sparse
+
+        size, n0 = self.size, previous.size
         if n0 == size:  # the same pattern: its matrix is shared (values are set per use)
             return previous._a
         # ``sparse`` drops explicit zeros; previous's values are placeholders between
         # factorisations, so they are set to ones.
-        previous._a.V = matrix(1.0, (previous._lower.size, 1))
-        below, right, k = ~old & (columns < n0), columns >= n0, size - n0
+        previous._a.V = self._matrix(1.0, (previous._lower.size, 1))
+        below, right, k = columns < n0, columns >= n0, size - n0
         return sparse(
             [
                 [previous._a, ones_at(rows[below] - n0, columns[below], (k, n0))],
@@ -351,12 +378,14 @@ def make_cholesky(
     backend: str = "auto",
     for_covariance: bool = False,
     previous=None,
+    appended: Appended | None = None,
 ):
     """A factoriser for the symmetric CSC pattern (both triangles stored, sorted indices);
     ``for_covariance`` prepares it for ``covariance_blocks``. ``previous``, a factoriser of
-    the same backend for a pattern this one grew from, may speed up the set-up."""
+    the same backend for a pattern this one grew from (as ``appended`` says, where known),
+    may speed up the set-up."""
     backend = resolve_backend(backend)
     if backend == "cholmod":
         grown_from = previous if isinstance(previous, CholmodCholesky) else None
-        return CholmodCholesky(indices, indptr, size, for_covariance, grown_from)
+        return CholmodCholesky(indices, indptr, size, for_covariance, grown_from, appended)
     return ScipyCholesky(indices, indptr, size)

@@ -151,11 +151,11 @@ def values_to_gtsam(graph, nodes: np.ndarray, values: LieGroup):
     return out
 
 
-def values_from_gtsam(graph, gtsam_values, count: int | None = None) -> LieGroup:
-    """The node values of a gtsam Values, in the graph's node order (its first ``count``
-    nodes, if given)."""
+def values_from_gtsam(graph, gtsam_values, nodes: np.ndarray | None = None) -> LieGroup:
+    """The node values of a gtsam Values, in the graph's node order (of the node indices
+    ``nodes`` alone, if given)."""
     getter = _VALUE_GETTER[graph.group]
-    ids = graph.node_ids[:count].tolist()
+    ids = (graph.node_ids if nodes is None else graph.node_ids[nodes]).tolist()
     return graph.group.stack([from_gtsam(getattr(gtsam_values, getter)(node)) for node in ids])
 
 

@@ -187,6 +187,18 @@ def test_pattern_holds_one_block_per_node_and_edge_pair():
     assert system.nnz == (free + 2 * chain_pairs) * d * d
 
 
+PATTERN_ARRAYS = (
+    "indptr",
+    "indices",
+    "diagonal_positions",
+    "_block_positions",
+    "_vector_positions",
+    "_block_keys",
+)
+"""What a grown pattern must hold as one built afresh does: CSC arrays, and where each stacked
+block and vector piece is summed."""
+
+
 def _grown(graph, seed: int, old_to_old: bool):
     """``graph`` with 6 nodes appended, joined to each other and to old nodes, and a prior;
     with ``old_to_old`` also a new edge between two old nodes."""
@@ -213,9 +225,36 @@ def test_a_grown_pattern_equals_one_built_afresh(backend, old_to_old):
     system = NormalEquations(grown, held, backend, previous=previous)
     fresh = NormalEquations(grown, held, backend)
     assert system.grown and not fresh.grown
-    for name in ("indptr", "indices", "diagonal_positions"):
-        np.testing.assert_array_equal(getattr(system, name), getattr(fresh, name))
+    _assert_same_pattern(system, fresh)
     _assert_matches_dense(system, grown, held, 0.0)
+
+
+def _assert_same_pattern(system, fresh):
+    for name in PATTERN_ARRAYS:
+        np.testing.assert_array_equal(getattr(system, name), getattr(fresh, name))
+    if system.cholesky.name == "cholmod":
+        np.testing.assert_array_equal(system.cholesky._lower, fresh.cholesky._lower)
+
+
+@pytest.mark.parametrize("backend", available_backends())
+def test_a_pattern_grown_pose_by_pose_equals_one_built_afresh(backend):
+    """As a back end grows it: one pose per step, by odometry and a loop closure to an old
+    pose, each pattern grown from the last; node 0 held, so blocks go to the trash slot."""
+    group = POSE_GROUPS[0]
+    graph = random_graph(group, 8, 3, seed=12)
+    held = np.array([0])
+    system = NormalEquations(graph, held, backend)
+    rng = np.random.default_rng(13)
+    for step in range(5):
+        new = graph.node_ids.max() + 1
+        graph.add_nodes([new], group.exp(0.3 * rng.normal(size=(1, group.dof))))
+        measured = group.exp(0.3 * rng.normal(size=(2, group.dof)))
+        old = graph.node_ids[2 * step % 5]
+        graph.add_edges([new - 1, old], [new, new], measured, np.eye(group.dof) * 2.0)
+        system = NormalEquations(graph, held, backend, previous=system)
+        assert system.grown
+        _assert_same_pattern(system, NormalEquations(graph, held, backend))
+        _assert_matches_dense(system, graph, held, 0.0)
 
 
 @pytest.mark.parametrize("held", [[0, 1, 2, 3], [0, 1]], ids=["every-node-held", "two-held"])
@@ -231,9 +270,7 @@ def test_a_pattern_grows_by_edges_and_priors_between_held_nodes(held):
     grown.add_prior(graph.node_ids[1], graph.values[1], np.eye(3))
     system = NormalEquations(grown, held, previous=previous)
     assert system.grown
-    fresh = NormalEquations(grown, held)
-    for name in ("indptr", "indices", "diagonal_positions"):
-        np.testing.assert_array_equal(getattr(system, name), getattr(fresh, name))
+    _assert_same_pattern(system, NormalEquations(grown, held))
     _assert_matches_dense(system, grown, held, 0.0)
 
 
