@@ -57,20 +57,19 @@ class BlockLayout:
             and previous._grows_into(block_of, a, b, p, d)
         )
         self._ends = (a, b, p)
-        appended = None
-        if self.grown:
-            block_keys, edge_blocks, prior_blocks, appended = self._grow(previous, a, b, p)
-        else:
-            block_keys, edge_blocks, prior_blocks = self._locate(a, b, p, coupled)
-        self._block_keys, self._edge_blocks = block_keys, edge_blocks
-        self._prior_blocks = prior_blocks
-        self._set_indptr()
         self.appended: Appended | None = None
         """How the CSC pattern extends ``previous``'s, where it was grown and that is known."""
-        if appended is not None:
-            self.appended = self._extend_layout(previous, edge_blocks, prior_blocks, appended)
-        else:
+        if not self.grown:
+            edge_blocks, prior_blocks = self._locate(a, b, p, coupled)
+            self._set_indptr()
             self._layout(edge_blocks, prior_blocks)
+            return
+        self._block_keys, appended = self._grow(previous)
+        self._set_indptr()
+        if appended is None:  # a block between old nodes was inserted: laid out anew
+            self._layout(self._index(self._edge_keys(a, b)), self._index(self._keys(p, p)))
+        else:
+            self.appended = self._extend_layout(previous, appended)
 
     def _keys(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
         """Block keys col·2³² + row (CSC order: by column, then row); −1 where a node is held.
@@ -81,22 +80,21 @@ class BlockLayout:
         """(4, m) keys of the blocks (a, a), (b, b), (a, b), (b, a) of edges a → b."""
         return np.stack([self._keys(a, a), self._keys(b, b), self._keys(a, b), self._keys(b, a)])
 
-    def _locate(self, a, b, p, coupled: np.ndarray | None = None):
-        """Sorted distinct block keys (every diagonal block, every edge and prior block, and
-        both blocks of each ``coupled`` pair (2, k)) and the index among them of each edge block
-        (4, m) and prior block (−1 where held)."""
+    def _locate(self, a, b, p, coupled: np.ndarray):
+        """Set the sorted distinct block keys (every diagonal block, every edge and prior block,
+        and both blocks of each ``coupled`` pair (2, k)); returns the index among them of each
+        edge block (4, m) and prior block (−1 where held)."""
         edge_keys, prior_keys = self._edge_keys(a, b), self._keys(p, p)
         diagonal = np.arange(self.num_blocks)
-        keys = [self._keys(diagonal, diagonal), edge_keys[2:].ravel(), prior_keys]
-        if coupled is not None:
-            keys.append(self._edge_keys(*coupled)[2:].ravel())
+        coupled_keys = self._edge_keys(*coupled)[2:].ravel()
+        keys = [self._keys(diagonal, diagonal), edge_keys[2:].ravel(), prior_keys, coupled_keys]
         block_keys = np.unique(np.concatenate(keys))
-        block_keys = block_keys[block_keys >= 0]
+        self._block_keys = block_keys[block_keys >= 0]
+        return self._index(edge_keys), self._index(prior_keys)
 
-        def index(keys: np.ndarray) -> np.ndarray:
-            return np.where(keys >= 0, np.searchsorted(block_keys, keys), -1)
-
-        return block_keys, index(edge_keys), index(prior_keys)
+    def _index(self, keys: np.ndarray) -> np.ndarray:
+        """The index of each block key among the sorted keys; −1 for a held node's (−1)."""
+        return np.where(keys >= 0, np.searchsorted(self._block_keys, keys), -1)
 
     def _grows_into(self, block_of, a, b, p, d: int) -> bool:
         """Whether nodes' blocks ``block_of`` and edge (a → b) and prior (p) blocks extend this
@@ -110,36 +108,31 @@ class BlockLayout:
             )
         )
 
-    def _grow(self, previous: BlockLayout, a, b, p):
-        """``_locate`` for a graph that grew from ``previous``'s: its keys are kept, the
-        appended edges' new keys are inserted in order, and old block indices shift by the
-        number of keys inserted before them. Also returns the
-        inserted keys' indices if each inserted block touches an appended node (it then ends
-        its column: ``_extend_layout``), else None."""
-        old_edges, old_priors = previous._edge_blocks.shape[1], previous._prior_blocks.size
+    def _grow(self, previous: BlockLayout) -> tuple[np.ndarray, np.ndarray | None]:
+        """The sorted keys of a graph that grew from ``previous``'s: its keys, with the new
+        keys of the appended edges and priors inserted in order. Also returns the inserted
+        keys' indices if each inserted block touches an appended node (it then ends its column:
+        ``_extend_layout``), else None."""
+        a, b, p = self._ends
+        old_edges, old_priors = previous._ends[0].size, previous._ends[2].size
         old_keys = previous._block_keys
-        new_keys, new_edge_blocks, new_prior_blocks = self._locate(
-            a[old_edges:], b[old_edges:], p[old_priors:]
+        diagonal = np.arange(previous.num_blocks, self.num_blocks)
+        new_keys = np.concatenate(
+            [
+                self._keys(diagonal, diagonal),
+                self._edge_keys(a[old_edges:], b[old_edges:])[2:].ravel(),
+                self._keys(p[old_priors:], p[old_priors:]),
+            ]
         )
+        new_keys = np.unique(new_keys[new_keys >= 0])
         found = np.minimum(np.searchsorted(old_keys, new_keys), max(old_keys.size - 1, 0))
         added = new_keys[old_keys[found] != new_keys] if old_keys.size else new_keys
         inserted_at = np.searchsorted(old_keys, added)
         block_keys = np.insert(old_keys, inserted_at, added)
-        old_index = np.arange(old_keys.size)
-        moved = old_index + np.searchsorted(inserted_at, old_index, side="right")
-        located = np.searchsorted(block_keys, new_keys)
-        edge_blocks = np.concatenate(
-            [_mapped(previous._edge_blocks, moved), _mapped(new_edge_blocks, located)], axis=1
-        )
-        prior_blocks = np.concatenate(
-            [_mapped(previous._prior_blocks, moved), _mapped(new_prior_blocks, located)]
-        )
-        added_cols, added_rows = added >> KEY_SHIFT, added & KEY_ROW
         old_blocks = previous.num_blocks
-        appended = None
-        if np.all((added_cols >= old_blocks) | (added_rows >= old_blocks)):
-            appended = inserted_at + np.arange(added.size)
-        return block_keys, edge_blocks, prior_blocks, appended
+        if np.all(((added >> KEY_SHIFT) >= old_blocks) | ((added & KEY_ROW) >= old_blocks)):
+            return block_keys, inserted_at + np.arange(added.size)
+        return block_keys, None
 
     def _set_indptr(self) -> None:
         """The CSC ``indptr`` of the sorted block keys, and each block column's first key."""
@@ -189,20 +182,14 @@ class BlockLayout:
         )
         self._vector_positions = np.concatenate(self._stacked_vector(*self._ends))
 
-    def _extend_layout(
-        self,
-        previous: BlockLayout,
-        edge_blocks: np.ndarray,
-        prior_blocks: np.ndarray,
-        appended: np.ndarray,
-    ) -> Appended:
+    def _extend_layout(self, previous: BlockLayout, appended: np.ndarray) -> Appended:
         """``_layout`` for a pattern grown from ``previous``'s where every inserted block
         (``appended``, indices among the keys) touches an appended node. In an old column those
         come after every old entry, so each old entry moves by its column's shift, and only the
         inserted blocks and the appended edges and priors are located. Returns how the CSC
         pattern extends ``previous``'s, for the factoriser's set-up."""
-        d, old_edges = self.d, previous._edge_blocks.shape[1]
-        old_priors = previous._prior_blocks.size
+        d, (a, b, p) = self.d, self._ends
+        old_edges, old_priors = previous._ends[0].size, previous._ends[2].size
         shift = self.indptr[: previous.size] - previous.indptr[: previous.size]
         relocated = np.arange(previous.nnz + 1)
         relocated[:-1] += np.repeat(shift, np.diff(previous.indptr))
@@ -216,20 +203,21 @@ class BlockLayout:
             [relocated[previous.diagonal_positions], self._diagonal_positions(new_nodes)]
         )
 
-        new_edges, new_priors = edge_blocks[:, old_edges:], prior_blocks[old_priors:]
+        new_edges = self._edge_keys(a[old_edges:], b[old_edges:])
+        new_priors = self._keys(p[old_priors:], p[old_priors:])
         touched = np.unique(np.concatenate([new_edges.ravel(), new_priors]))
         touched = touched[touched >= 0]
 
-        def local(blocks: np.ndarray) -> np.ndarray:
-            return np.where(blocks >= 0, np.searchsorted(touched, blocks), -1)
+        def local(keys: np.ndarray) -> np.ndarray:  # the index among ``touched``
+            return np.where(keys >= 0, np.searchsorted(touched, keys), -1)
 
-        blocks = self._stacked_blocks(local(new_edges), local(new_priors), self._positions(touched))
+        positions = self._positions(self._index(touched))
+        blocks = self._stacked_blocks(local(new_edges), local(new_priors), positions)
         self._block_positions = _spliced(
             previous._block_positions, 4 * old_edges * d * d, relocated, *blocks
         )
         moved = np.arange(previous.size + 1)
         moved[-1] = self.size  # a held node's piece: past the end
-        a, b, p = self._ends
         pieces = self._stacked_vector(a[old_edges:], b[old_edges:], p[old_priors:])
         self._vector_positions = _spliced(
             previous._vector_positions, 2 * old_edges * d, moved, *pieces
@@ -297,15 +285,6 @@ class BlockLayout:
         import scipy.sparse  # on use: a solve with CHOLMOD does without scipy
 
         return scipy.sparse.csc_matrix((data, self.indices, self.indptr), (self.size, self.size))
-
-
-def _mapped(blocks: np.ndarray, index: np.ndarray) -> np.ndarray:
-    """``index[blocks]`` where a block is located, −1 where it is held (−1), even when
-    ``index`` is empty (every node held)."""
-    located = np.full_like(blocks, -1)
-    kept = blocks >= 0
-    located[kept] = index[blocks[kept]]
-    return located
 
 
 def _spliced(
