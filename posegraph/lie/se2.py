@@ -18,6 +18,13 @@ from .so2 import rotation_matrix_2d
 _J = np.array([[0.0, -1.0], [1.0, 0.0]])
 
 
+def _rotated(angle: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """R(θ) p for (…) angles and (…, 2) points, elementwise (no batched matrix product)."""
+    cos, sin = np.cos(angle), np.sin(angle)
+    x, y = points[..., 0], points[..., 1]
+    return np.stack([cos * x - sin * y, sin * x + cos * y], axis=-1)
+
+
 @dataclasses.dataclass(frozen=True, eq=False, repr=False)
 class SE2(LieGroup):
     """Planar poses ``p ↦ R(θ) p + t``."""
@@ -69,21 +76,17 @@ class SE2(LieGroup):
         return np.concatenate([rho, theta[..., None]], axis=-1)
 
     def compose(self, other: SE2) -> SE2:
-        t = np.einsum("...ij,...j->...i", self.rotation_matrix, other.translation)
+        t = _rotated(self.angle, other.translation)
         return SE2(_coeffs.wrap_angle(self.angle + other.angle), self.translation + t)
 
     def inverse(self) -> SE2:
-        r_t = np.swapaxes(self.rotation_matrix, -1, -2)
-        t = -np.einsum("...ij,...j->...i", r_t, self.translation)
+        t = -_rotated(-self.angle, self.translation)
         return SE2(_coeffs.wrap_angle(-self.angle), t)
 
     def between(self, other: SE2) -> SE2:
         """X⁻¹ Y = (θ_Y − θ_X, R(θ_X)ᵀ (t_Y − t_X)) in one pass: one cos and sin, no
         intermediate inverse."""
-        cos, sin = np.cos(self.angle), np.sin(self.angle)
-        d = other.translation - self.translation
-        x, y = d[..., 0], d[..., 1]
-        t = np.stack([cos * x + sin * y, cos * y - sin * x], axis=-1)
+        t = _rotated(-self.angle, other.translation - self.translation)
         return SE2(_coeffs.wrap_angle(other.angle - self.angle), t)
 
     def as_matrix(self) -> np.ndarray:
@@ -142,17 +145,20 @@ class SE2(LieGroup):
 
     @classmethod
     def jr_inv(cls, tangent: np.ndarray) -> np.ndarray:
-        """Inverse of jr = [[A, w], [0, 1]]: A = a I − b J, so A⁻¹ = (a I + b J)/(a² + b²)."""
-        jr = cls.jr(tangent)
-        a, b = jr[..., 0, 0], jr[..., 0, 1]
+        """Inverse of jr = [[A, w], [0, 1]]: [[A⁻¹, −A⁻¹ w], [0, 1]], where A = a I − b J, so
+        A⁻¹ = (a I + b J)/(a² + b²)."""
+        tangent = np.asarray(tangent, float)
+        x, y, theta = tangent[..., 0], tangent[..., 1], tangent[..., 2]
+        a, d, theta_minus_sin_over_cube = _coeffs.rotation_coefficients(theta)
+        b, c = theta * d, theta * theta_minus_sin_over_cube
+        w_x, w_y = c * x - d * y, d * x + c * y
         norm = a * a + b * b
         a, b = a / norm, b / norm
-        w = jr[..., :2, 2]
-        out = np.zeros_like(jr)
+        out = np.zeros(tangent.shape[:-1] + (3, 3))
         out[..., 0, 0] = out[..., 1, 1] = a
         out[..., 0, 1] = -b
         out[..., 1, 0] = b
-        out[..., 0, 2] = -(a * w[..., 0] - b * w[..., 1])
-        out[..., 1, 2] = -(b * w[..., 0] + a * w[..., 1])
+        out[..., 0, 2] = b * w_y - a * w_x
+        out[..., 1, 2] = -(b * w_x + a * w_y)
         out[..., 2, 2] = 1.0
         return out
