@@ -25,7 +25,7 @@ def factorized_information(
     factorised by ``factorize_information``; returns the between edges' linearisation."""
     between = linearize_between(values, graph.edges)
     priors = linearize_priors(values, graph.priors)
-    data, _ = system.assemble(between, graph.edges.information, priors, graph.priors.information)
+    data = system.normal_matrix(between, graph.edges.information, priors, graph.priors.information)
     factorize_information(system, data, regularize, least_share)
     return between
 

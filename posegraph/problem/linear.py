@@ -157,30 +157,45 @@ class NormalEquations(BlockPattern):
         )
         return other
 
-    def assemble(
+    def normal_matrix(
         self,
         between: Linearization,
         between_information: np.ndarray,
         priors: Linearization,
         prior_information: np.ndarray,
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """The CSC ``data`` of H and the gradient g, from the Jacobians J of every edge (J =
-        [Jᵢ Jⱼ] of a between edge): Jᵀ Ω J and Jᵀ Ω r, written straight into the stacked
-        buffers that ``matrix_data`` and ``vector`` sum."""
-        m, p, d = between.residuals.shape[0], priors.residuals.shape[0], self.dof
-        edge_entries, edge_pieces = 4 * m * d * d, 2 * m * d
-        blocks, pieces = np.empty(edge_entries + p * d * d), np.empty(edge_pieces + p * d)
-        _normal_terms(between, between_information, blocks[:edge_entries], pieces[:edge_pieces])
-        _normal_terms(priors, prior_information, blocks[edge_entries:], pieces[edge_pieces:])
-        return self.matrix_data(blocks), self.vector(pieces)
+    ) -> np.ndarray:
+        """The CSC ``data`` of H = Σ Jᵀ Ω J from the Jacobians J of every edge (J = [Jᵢ Jⱼ] of a
+        between edge), written straight into the stacked buffer that ``matrix_data`` sums."""
+        cut = 4 * len(between.residuals) * self.dof**2
+        blocks = np.empty(cut + len(priors.residuals) * self.dof**2)
+        _products(between.jacobians, between_information, between.jacobians, blocks[:cut])
+        _products(priors.jacobians, prior_information, priors.jacobians, blocks[cut:])
+        return self.matrix_data(blocks)
+
+    def gradient(
+        self,
+        between: Linearization,
+        between_information: np.ndarray,
+        priors: Linearization,
+        prior_information: np.ndarray,
+    ) -> np.ndarray:
+        """The gradient g = Σ Jᵀ Ω r, written straight into the stacked buffer that ``vector``
+        sums."""
+        cut = 2 * len(between.residuals) * self.dof
+        pieces = np.empty(cut + len(priors.residuals) * self.dof)
+        for part, linearization, information in (
+            (pieces[:cut], between, between_information),
+            (pieces[cut:], priors, prior_information),
+        ):
+            jacobians = linearization.jacobians
+            weighted = np.einsum("mij,mj->mi", information, linearization.residuals)  # Ω r
+            out = part.reshape(jacobians.shape[0], jacobians.shape[2])
+            np.einsum("mij,mi->mj", jacobians, weighted, out=out)
+        return self.vector(pieces)
 
 
-def _normal_terms(
-    linearization: Linearization, information: np.ndarray, blocks: np.ndarray, pieces: np.ndarray
-) -> None:
-    """Write Jᵀ Ω J and Jᵀ Ω r of every edge into the flat buffers ``blocks`` and ``pieces``."""
-    jacobians = linearization.jacobians
-    count, width = jacobians.shape[0], jacobians.shape[2]
-    jt_omega = np.swapaxes(jacobians, 1, 2) @ information
-    np.matmul(jt_omega, jacobians, out=blocks.reshape(count, width, width))
-    np.matmul(jt_omega, linearization.residuals[:, :, None], out=pieces.reshape(count, width, 1))
+def _products(left: np.ndarray, information: np.ndarray, right: np.ndarray, out: np.ndarray):
+    """Write Lᵀ Ω R of every measurement into the flat buffer ``out`` (batched products: faster
+    than ``einsum`` for these matrices, slower for the gradient's vectors)."""
+    shape = (left.shape[0], left.shape[2], right.shape[2])
+    np.matmul(np.swapaxes(left, 1, 2), information @ right, out=out.reshape(shape))

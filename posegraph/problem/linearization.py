@@ -4,7 +4,7 @@ Jacobians only once a step is accepted, and the linearisation of appended edges 
 from __future__ import annotations
 
 import functools
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -18,6 +18,9 @@ from .factors import (
     residuals_of,
     weighted_squares,
 )
+
+if TYPE_CHECKING:
+    from .linear import NormalEquations
 
 
 class EdgeWeighting(Protocol):
@@ -35,7 +38,8 @@ class Linearized:
     edges if their nodes still have the values it was taken at (a warm start).
 
     ``normal_matrix`` is H's CSC data at these values once the solver has assembled it (None
-    before), which covariances at the solution reuse (``normal_matrix_for``).
+    before, and where the run ended on a Newton decrement without needing it), which covariances
+    at the solution reuse (``normal_matrix_for``).
     """
 
     def __init__(
@@ -76,11 +80,14 @@ class Linearized:
         appended = Linearization(self._residuals, jacobians)
         return appended if self._reused is None else self._reused.extended(appended)
 
-    def normal_matrix_for(self, graph: PoseGraph, values: LieGroup) -> np.ndarray | None:
-        """``normal_matrix``, if it is H of ``graph`` at ``values``: assembled at exactly these
-        values, over exactly the graph's edges and priors, in least squares (no IRLS weights);
-        else None."""
-        if self.normal_matrix is None or self.weighted:
+    def normal_matrix_for(
+        self, graph: PoseGraph, values: LieGroup, system: NormalEquations
+    ) -> np.ndarray | None:
+        """H's CSC data in ``system``'s pattern (the solve's, of this linearisation) if this is
+        the least-squares linearisation (no IRLS weights) of ``graph`` at exactly ``values``,
+        over exactly its edges and priors: ``normal_matrix``, assembled here and kept if the
+        solve did not need it; else None."""
+        if self.weighted:
             return None
         same = (
             len(values) == len(self.values)
@@ -90,6 +97,9 @@ class Linearized:
             and len(graph.priors) == len(self.prior_edges)
             and graph.priors.starts_with(self.prior_edges)
         )
+        if same and self.normal_matrix is None:
+            terms = (self.between, self.information, self.priors, graph.priors.information)
+            self.normal_matrix = system.normal_matrix(*terms)
         return self.normal_matrix if same else None
 
     def _holds_for(self, edges, values: LieGroup) -> bool:

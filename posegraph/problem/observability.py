@@ -115,7 +115,7 @@ def first_order_information(
     between = Linearization(met, between_jacobians(relative_poses(values, edges), met))
     unit = np.broadcast_to(np.eye(d), (len(priors), d, d))
     at_priors = Linearization(np.zeros((len(priors), d)), unit)
-    data, _ = system.assemble(
+    data = system.normal_matrix(
         between,
         _measured_projector(edges.information),
         at_priors,

@@ -139,12 +139,12 @@ def _factorize(
 ) -> _Factored:
     """H factorised at ``values``. ``solved``, a least-squares solve of this graph ending at
     ``values``, lends its pattern (where ``covariance_of`` lies within it: the groups are
-    edges' ends) and, if it assembled H there, H and the Jacobians."""
+    edges' ends) and its linearisation there: H and the Jacobians."""
     held = graph.gauge_nodes()
     lent = solved is not None and solved.system is not None and solved.system.describes(graph, held)
     if lent:
         system = solved.system.for_covariance(linear_solver)
-        data = solved.linearization.normal_matrix_for(graph, values)
+        data = solved.linearization.normal_matrix_for(graph, values, system)
     else:
         system, data = NormalEquations(graph, held, linear_solver, covariance_of), None
     if data is None:

@@ -309,12 +309,12 @@ class Smoother:
         return self._last[1].system
 
     def current_normal_matrix(self, values, linear_solver: str) -> np.ndarray | None:
-        """H's CSC data at ``values``, in the pattern of ``current_system(linear_solver)``, if
-        the last least-squares solve assembled it there and the graph's measurements are those
-        it solved; else None."""
-        if self.current_system(linear_solver) is None:
+        """H's CSC data at ``values`` in ``current_system(linear_solver)``'s pattern, if the last
+        least-squares solve of the graph's measurements linearised there; else None."""
+        system = self.current_system(linear_solver)
+        if system is None:
             return None
-        return self._last[1].linearization.normal_matrix_for(self.graph, values)
+        return self._last[1].linearization.normal_matrix_for(self.graph, values, system)
 
     def weights(self) -> tuple[np.ndarray, np.ndarray]:
         """The weights of the graph's between edges and priors in the last solution

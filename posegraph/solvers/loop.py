@@ -24,6 +24,7 @@ are damped by λ max diag(H), as identity damping (gtsam's and g2o's default) wo
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable
 
@@ -136,25 +137,41 @@ def _normal_equations(
     return system, ["sparsity pattern (grown)"] if system.grown else []
 
 
-def _assemble(graph, system, current, clock):
-    """H's CSC data (kept as ``current.normal_matrix``), the gradient and diag(H) at
-    ``current`` (its Jacobians timed as linearisation)."""
-    between = current.between
-    clock.lap("linearize")
-    data, gradient = system.assemble(
-        between, current.information, current.priors, graph.priors.information
-    )
-    current.normal_matrix = data
-    clock.lap("assemble")
-    return data, gradient, system.diagonal(data)
+class _Assembled:
+    """The gradient at a linearisation (its Jacobians timed as linearisation), and H's CSC data
+    (kept as ``current.normal_matrix``) and diagonal there, assembled on first use: a run that
+    ends on the gradient's Newton decrement (``_after_newton_step``) never needs them."""
+
+    def __init__(self, graph: PoseGraph, system: NormalEquations, current: Linearized, clock):
+        between = current.between
+        clock.lap("linearize")
+        self._terms = (between, current.information, current.priors, graph.priors.information)
+        self.gradient = system.gradient(*self._terms)
+        clock.lap("assemble")
+        self._system, self._current, self._clock = system, current, clock
+
+    @functools.cached_property
+    def data(self) -> np.ndarray:
+        self._clock.lap("linearize")
+        data = self._current.normal_matrix = self._system.normal_matrix(*self._terms)
+        self._clock.lap("assemble")
+        return data
+
+    @functools.cached_property
+    def diagonal(self) -> np.ndarray:
+        return self._system.diagonal(self.data)
+
+    def for_step(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(H's data, the gradient, diag(H)): what a step is proposed from."""
+        return self.data, self.gradient, self.diagonal
 
 
 def _iterate(graph, options, callback, system, weighting, clock, current, history):
     """The iterations of ``solve``; returns (final linearisation, termination, converged).
     ``history`` receives a record per iteration."""
     termination, converged = MAX_ITERATIONS, False
-    data, gradient, diagonal = _assemble(graph, system, current, clock)
-    steps = STEPS[options.method](options, diagonal)
+    assembled = _Assembled(graph, system, current, clock)
+    steps = STEPS[options.method](options, assembled.diagonal)
     fresh = True  # a linearisation not yet proposed from
     chord = None  # the next step, from the last factorisation (``_after_newton_step``)
     # |x| of the step test, at the start: it changes little over a run, and a Log of every
@@ -162,13 +179,13 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
     size = float(np.linalg.norm(current.values.log()))
 
     for iteration in range(1, options.max_iterations + 1):
-        stop = _stop_before_step(options, gradient, clock)
+        stop = _stop_before_step(options, assembled.gradient, clock)
         if stop is not None:
             termination, converged = stop
             break
         proposal, stale, chord = chord, chord is not None, None
         if not stale:
-            proposal = steps.propose(graph, system, data, gradient, diagonal, fresh, clock)
+            proposal = steps.propose(graph, system, *assembled.for_step(), fresh, clock)
             fresh = False
         if _promises_little(options, proposal, current.error):
             termination, converged = PREDICTED_BELOW_TOLERANCE, True
@@ -201,10 +218,10 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
             break
         if not accepted:
             continue
-        data, gradient, diagonal = _assemble(graph, system, current, clock)
+        assembled = _Assembled(graph, system, current, clock)
         fresh = True
         if proposal.newton:
-            done, chord = _after_newton_step(options, system, gradient, current, decrease, clock)
+            done, chord = _after_newton_step(options, system, assembled, current, decrease, clock)
             if done:
                 termination, converged = PREDICTED_BELOW_TOLERANCE, True
                 break
@@ -261,15 +278,17 @@ converging tail just under the tolerance."""
 
 
 def _after_newton_step(
-    options, system, gradient, current, decrease, clock
+    options, system, assembled: _Assembled, current, decrease, clock
 ) -> tuple[bool, Proposal | None]:
     """After an accepted (near) Gauss-Newton step, what the factorisation just used says at the
-    new values, where H has changed by second order: (converged, next step). The run has
+    new values, where H has changed by second order: (converged, next step), from the gradient
+    there (``assembled``, whose H is assembled only if a later step needs it). The run has
     converged where the Newton decrement p = ½ gᵀH⁻¹g promises less than the tolerance t,
     without a new factorisation. Near the optimum the decrement shrinks by q = p / (the step's
     decrease) per step; where q·p ≤ ``CHORD_MARGIN``·t, δ = −H⁻¹g is the last step (the chord,
     or simplified Newton, method: Kelley 2003, "Solving Nonlinear Equations with Newton's
     Method", §2.3.3), at the cost of a solve, not of a factorisation."""
+    gradient = assembled.gradient
     step = -system.solve(gradient)
     clock.lap("solve")
     chord = Proposal(step, -0.5 * float(gradient @ step), True, False, True)

@@ -87,9 +87,9 @@ def test_the_newest_poses_covariance_fills_the_last_solves_normal_equations(monk
     np.testing.assert_allclose(covariance, posegraph.marginals(graph.copy(), newest), rtol=1e-10)
 
 
-def test_the_covariance_at_the_solution_factorises_the_h_the_solve_assembled(monkeypatch):
-    """At the solution of a least-squares solve, the covariance factorises the H that the
-    solve assembled there, without linearising again; at other values, and after a robust
+def test_the_covariance_at_the_solution_factorises_h_of_the_solves_linearisation(monkeypatch):
+    """At the solution of a least-squares solve, the covariance factorises H of the solve's
+    linearisation there, without linearising again; at other values, and after a robust
     solve (whose H holds IRLS weights), it linearises. The covariance is the same either way
     (a copy, which has no cached solve, computes it afresh)."""
     graph, _ = manhattan_world(num_poses=120, seed=88)
@@ -190,7 +190,7 @@ def test_marginals_are_blocks_of_the_inverse_information(
     posegraph.optimize(graph)
     held = graph.gauge_nodes()
     system = NormalEquations(graph, held, "scipy")
-    data, _ = system.assemble(
+    data = system.normal_matrix(
         linearize_between(graph.values, graph.edges),
         graph.edges.information,
         linearize_priors(graph.values, graph.priors),

@@ -16,7 +16,7 @@ from posegraph.problem.factors import linearize_between, linearize_priors
 from posegraph.problem.linear import NormalEquations
 from posegraph.robust.spec import robust_mask
 from posegraph.solvers import SolverOptions, solve
-from posegraph.solvers.loop import NOT_FINITE
+from posegraph.solvers.loop import NOT_FINITE, PREDICTED_BELOW_TOLERANCE
 from posegraph.solvers.options import DEFAULT_INITIAL_DAMPING
 
 from ..conftest import (
@@ -33,7 +33,7 @@ def _gradient_norm(graph, values, held):
     system = NormalEquations(graph, held, "scipy")
     lin = linearize_between(values, graph.edges)
     prior_lin = linearize_priors(values, graph.priors)
-    _, gradient = system.assemble(lin, graph.edges.information, prior_lin, graph.priors.information)
+    gradient = system.gradient(lin, graph.edges.information, prior_lin, graph.priors.information)
     return np.abs(gradient).max()
 
 
@@ -87,18 +87,18 @@ def test_dogleg_factorises_once_per_linearisation_and_shrinks_its_region_on_reje
     ends where Levenberg-Marquardt ends."""
     graph = random_graph(SE2, 40, 30, seed=43, noise=1.5)
     factorisations, linearisations = [], []
-    factorize, assemble = NormalEquations.factorize, NormalEquations.assemble
+    factorize, gradient = NormalEquations.factorize, NormalEquations.gradient
 
     def counted_factorize(self, data, damping=None):
         factorisations.append(damping)
         factorize(self, data, damping)
 
-    def counted_assemble(self, *args):
+    def counted_gradient(self, *args):
         linearisations.append(1)
-        return assemble(self, *args)
+        return gradient(self, *args)
 
     monkeypatch.setattr(NormalEquations, "factorize", counted_factorize)
-    monkeypatch.setattr(NormalEquations, "assemble", counted_assemble)
+    monkeypatch.setattr(NormalEquations, "gradient", counted_gradient)
     tight = dict(relative_decrease=1e-14)
     dogleg = solve(graph, SolverOptions(method="dogleg", **tight))
     records = dogleg.summary.iterations
@@ -111,6 +111,26 @@ def test_dogleg_factorises_once_per_linearisation_and_shrinks_its_region_on_reje
     monkeypatch.undo()
     lm = solve(graph, SolverOptions(method="lm", **tight))
     assert dogleg.summary.final_error == pytest.approx(lm.summary.final_error, rel=1e-9)
+
+
+@pytest.mark.parametrize("method", ["lm", "gn"])
+def test_a_run_that_ends_on_the_newton_decrement_does_not_assemble_h_there(monkeypatch, method):
+    """The last linearisation's gradient gives the Newton decrement that ends the run; H there
+    would serve only a further step, so it is not assembled: one H fewer than gradients."""
+    graph = random_graph(SE2, 40, 30, seed=44, noise=0.05)
+    counts = {"gradient": 0, "normal_matrix": 0}
+    for name in counts:
+        original = getattr(NormalEquations, name)
+
+        def counted(self, *args, _name=name, _original=original):
+            counts[_name] += 1
+            return _original(self, *args)
+
+        monkeypatch.setattr(NormalEquations, name, counted)
+    result = solve(graph, SolverOptions(method=method))
+    assert result.summary.termination == PREDICTED_BELOW_TOLERANCE
+    assert counts["gradient"] >= 2 and counts["normal_matrix"] == counts["gradient"] - 1
+    assert result.linearization.normal_matrix is None
 
 
 def test_gnc_over_the_dogleg_rejects_what_it_rejects_over_levenberg_marquardt():
