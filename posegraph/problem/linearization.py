@@ -97,10 +97,21 @@ class Linearized:
             and len(graph.priors) == len(self.prior_edges)
             and graph.priors.starts_with(self.prior_edges)
         )
-        if same and self.normal_matrix is None:
-            terms = (self.between, self.information, self.priors, graph.priors.information)
+        return self.normal_matrix_in(system) if same else None
+
+    def normal_matrix_in(self, system: NormalEquations) -> np.ndarray:
+        """H's CSC data at these values in ``system``'s pattern: ``normal_matrix``, assembled
+        on first use."""
+        if self.normal_matrix is None:
+            information = self.prior_edges.information
+            terms = (self.between, self.information, self.priors, information)
             self.normal_matrix = system.normal_matrix(*terms)
-        return self.normal_matrix if same else None
+        return self.normal_matrix
+
+    def gradient_in(self, system: NormalEquations) -> np.ndarray:
+        """The gradient Jᵀ Ω r at these values, in ``system``'s variable order."""
+        information = self.prior_edges.information
+        return system.gradient(self.between, self.information, self.priors, information)
 
     def _holds_for(self, edges, values: LieGroup) -> bool:
         """Whether this linearisation is that of the first edges of ``edges`` at ``values``."""

@@ -142,18 +142,17 @@ class _Assembled:
     (kept as ``current.normal_matrix``) and diagonal there, assembled on first use: a run that
     ends on the gradient's Newton decrement (``_after_newton_step``) never needs them."""
 
-    def __init__(self, graph: PoseGraph, system: NormalEquations, current: Linearized, clock):
-        between = current.between
+    def __init__(self, system: NormalEquations, current: Linearized, clock: _Clock) -> None:
+        _ = current.between  # the Jacobians, cached: timed as linearisation
         clock.lap("linearize")
-        self._terms = (between, current.information, current.priors, graph.priors.information)
-        self.gradient = system.gradient(*self._terms)
+        self.gradient = current.gradient_in(system)
         clock.lap("assemble")
         self._system, self._current, self._clock = system, current, clock
 
     @functools.cached_property
     def data(self) -> np.ndarray:
         self._clock.lap("linearize")
-        data = self._current.normal_matrix = self._system.normal_matrix(*self._terms)
+        data = self._current.normal_matrix_in(self._system)
         self._clock.lap("assemble")
         return data
 
@@ -170,7 +169,7 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
     """The iterations of ``solve``; returns (final linearisation, termination, converged).
     ``history`` receives a record per iteration."""
     termination, converged = MAX_ITERATIONS, False
-    assembled = _Assembled(graph, system, current, clock)
+    assembled = _Assembled(system, current, clock)
     steps = STEPS[options.method](options, assembled.diagonal)
     fresh = True  # a linearisation not yet proposed from
     chord = None  # the next step, from the last factorisation (``_after_newton_step``)
@@ -218,7 +217,7 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
             break
         if not accepted:
             continue
-        assembled = _Assembled(graph, system, current, clock)
+        assembled = _Assembled(system, current, clock)
         fresh = True
         if proposal.newton:
             done, chord = _after_newton_step(options, system, assembled, current, decrease, clock)
