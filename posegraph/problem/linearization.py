@@ -103,15 +103,17 @@ class Linearized:
         """H's CSC data at these values in ``system``'s pattern: ``normal_matrix``, assembled
         on first use."""
         if self.normal_matrix is None:
-            information = self.prior_edges.information
-            terms = (self.between, self.information, self.priors, information)
-            self.normal_matrix = system.normal_matrix(*terms)
+            self.normal_matrix = system.normal_matrix(*self._terms())
         return self.normal_matrix
 
     def gradient_in(self, system: NormalEquations) -> np.ndarray:
         """The gradient Jᵀ Ω r at these values, in ``system``'s variable order."""
-        information = self.prior_edges.information
-        return system.gradient(self.between, self.information, self.priors, information)
+        return system.gradient(*self._terms())
+
+    def _terms(self) -> tuple[Linearization, np.ndarray, Linearization, np.ndarray]:
+        """What the normal equations are assembled from: the between edges' linearisation and
+        (weighted) information, the priors' and theirs."""
+        return self.between, self.information, self.priors, self.prior_edges.information
 
     def _holds_for(self, edges, values: LieGroup) -> bool:
         """Whether this linearisation is that of the first edges of ``edges`` at ``values``."""

@@ -86,15 +86,15 @@ class BlockLayout:
         edge block (4, m) and prior block (−1 where held)."""
         edge_keys, prior_keys = self._edge_keys(a, b), self._keys(p, p)
         diagonal = np.arange(self.num_blocks)
-        coupled_keys = self._edge_keys(*coupled)[2:].ravel()
-        keys = [self._keys(diagonal, diagonal), edge_keys[2:].ravel(), prior_keys, coupled_keys]
-        block_keys = np.unique(np.concatenate(keys))
-        self._block_keys = block_keys[block_keys >= 0]
+        coupled_keys = self._edge_keys(*coupled)[2:]
+        self._block_keys = _distinct(
+            self._keys(diagonal, diagonal), edge_keys[2:], prior_keys, coupled_keys
+        )
         return self._index(edge_keys), self._index(prior_keys)
 
     def _index(self, keys: np.ndarray) -> np.ndarray:
         """The index of each block key among the sorted keys; −1 for a held node's (−1)."""
-        return np.where(keys >= 0, np.searchsorted(self._block_keys, keys), -1)
+        return _located(keys, self._block_keys)
 
     def _grows_into(self, block_of, a, b, p, d: int) -> bool:
         """Whether nodes' blocks ``block_of`` and edge (a → b) and prior (p) blocks extend this
@@ -117,14 +117,11 @@ class BlockLayout:
         old_edges, old_priors = previous._ends[0].size, previous._ends[2].size
         old_keys = previous._block_keys
         diagonal = np.arange(previous.num_blocks, self.num_blocks)
-        new_keys = np.concatenate(
-            [
-                self._keys(diagonal, diagonal),
-                self._edge_keys(a[old_edges:], b[old_edges:])[2:].ravel(),
-                self._keys(p[old_priors:], p[old_priors:]),
-            ]
+        new_keys = _distinct(
+            self._keys(diagonal, diagonal),
+            self._edge_keys(a[old_edges:], b[old_edges:])[2:],
+            self._keys(p[old_priors:], p[old_priors:]),
         )
-        new_keys = np.unique(new_keys[new_keys >= 0])
         found = np.minimum(np.searchsorted(old_keys, new_keys), max(old_keys.size - 1, 0))
         added = new_keys[old_keys[found] != new_keys] if old_keys.size else new_keys
         inserted_at = np.searchsorted(old_keys, added)
@@ -205,14 +202,10 @@ class BlockLayout:
 
         new_edges = self._edge_keys(a[old_edges:], b[old_edges:])
         new_priors = self._keys(p[old_priors:], p[old_priors:])
-        touched = np.unique(np.concatenate([new_edges.ravel(), new_priors]))
-        touched = touched[touched >= 0]
-
-        def local(keys: np.ndarray) -> np.ndarray:  # the index among ``touched``
-            return np.where(keys >= 0, np.searchsorted(touched, keys), -1)
-
+        touched = _distinct(new_edges, new_priors)
         positions = self._positions(self._index(touched))
-        blocks = self._stacked_blocks(local(new_edges), local(new_priors), positions)
+        local = (_located(new_edges, touched), _located(new_priors, touched))
+        blocks = self._stacked_blocks(*local, positions)
         self._block_positions = _spliced(
             previous._block_positions, 4 * old_edges * d * d, relocated, *blocks
         )
@@ -285,6 +278,17 @@ class BlockLayout:
         import scipy.sparse  # on use: a solve with CHOLMOD does without scipy
 
         return scipy.sparse.csc_matrix((data, self.indices, self.indptr), (self.size, self.size))
+
+
+def _distinct(*keys: np.ndarray) -> np.ndarray:
+    """The sorted distinct block keys in these arrays, a held node's (−1) left out."""
+    distinct = np.unique(np.concatenate([array.ravel() for array in keys]))
+    return distinct[distinct >= 0]
+
+
+def _located(keys: np.ndarray, among: np.ndarray) -> np.ndarray:
+    """The index of each block key among the sorted keys ``among``; −1 for a held node's."""
+    return np.where(keys >= 0, np.searchsorted(among, keys), -1)
 
 
 def _spliced(
