@@ -26,11 +26,16 @@ def series_terms(first_left_out: Callable[[int], float], below: float, most: int
 
 
 def _even_series(theta_sq: np.ndarray, coefficients) -> np.ndarray:
-    """Σ_k c_k θ^{2k} for coefficients (k,), or for each column of (k, n) at once (…, n).
-    The powers are formed directly: θ² < 0.25 where a series is used, and the terms fall fast."""
+    """Σ_k c_k θ^{2k} for coefficients (k,), shaped as θ², or for each column of (k, n) at
+    once, (n, …). The powers are formed directly (a running product): θ² < 0.25 where a
+    series is used, and the terms fall fast."""
+    theta_sq = np.asarray(theta_sq, dtype=float)
     coefficients = np.asarray(coefficients, dtype=float)
-    powers = np.asarray(theta_sq, dtype=float)[..., None] ** np.arange(len(coefficients))
-    return powers @ coefficients
+    powers = np.empty((len(coefficients), theta_sq.size))
+    powers[0] = 1.0
+    for k in range(1, len(coefficients)):
+        np.multiply(powers[k - 1], theta_sq.reshape(-1), out=powers[k])
+    return (coefficients.T @ powers).reshape(coefficients.shape[1:] + theta_sq.shape)
 
 
 def _coefficients(
@@ -44,12 +49,12 @@ def _coefficients(
     if not small.any():
         return closed_forms(theta)
     if small.all():
-        values = _even_series(theta * theta, series)
-        return tuple(values[..., k] for k in range(values.shape[-1]))
+        theta_sq = theta * theta
+        return tuple(_even_series(theta_sq, series))
     coefficients = tuple(np.asarray(c) for c in closed_forms(np.where(small, 1.0, theta)))
-    values = _even_series(theta[small] ** 2, series)
-    for k, out in enumerate(coefficients):
-        out[small] = values[:, k]
+    theta_sq = theta[small] ** 2
+    for values, out in zip(_even_series(theta_sq, series), coefficients, strict=True):
+        out[small] = values
     return coefficients
 
 
@@ -136,11 +141,13 @@ def so3_jr_inv_coefficient_from_trig(
     return result
 
 
+_HALF_COT_SERIES = np.array([1.0, *(-c for c in _JR_INV_SERIES)])
+
+
 def half_cot_half(theta: np.ndarray) -> np.ndarray:
     """(θ/2) cot(θ/2) = θ sin θ / (2 (1 − cos θ)), used by the SE(2) logarithm. Its series is
     1 − θ² times that of ``so3_jr_inv_coefficient``."""
-    series = [1.0, *(-c for c in _JR_INV_SERIES)]
-    return _coefficient(theta, lambda t: 0.5 * t * np.sin(t) / (1.0 - np.cos(t)), series)
+    return _coefficient(theta, lambda t: 0.5 * t * np.sin(t) / (1.0 - np.cos(t)), _HALF_COT_SERIES)
 
 
 def hat3(v: np.ndarray) -> np.ndarray:
@@ -235,10 +242,13 @@ def vee3(m: np.ndarray) -> np.ndarray:
 
 
 def wrap_angle(theta: np.ndarray) -> np.ndarray:
-    """Wrap angles to (−π, π]. Angles already there are returned bit for bit: the shift by π
-    would round them (1e-10 + π − π = 1.00000008e-10), and a file's angles would be written
-    back with other digits."""
-    theta = np.asarray(theta, dtype=float)
-    wrapped = np.remainder(theta + np.pi, 2.0 * np.pi) - np.pi
-    wrapped = np.where(wrapped == -np.pi, np.pi, wrapped)
-    return np.where((theta > -np.pi) & (theta <= np.pi), theta, wrapped)
+    """Wrap angles to (−π, π], as a new array. Angles already there are returned bit for bit:
+    the shift by π would round them (1e-10 + π − π = 1.00000008e-10), and a file's angles would
+    be written back with other digits."""
+    theta = np.array(theta, dtype=float)
+    if np.abs(theta).max(initial=0.0) < np.pi:  # False for NaN: those are wrapped (to NaN)
+        return theta
+    outside = ~((theta > -np.pi) & (theta <= np.pi))
+    wrapped = np.remainder(theta[outside] + np.pi, 2.0 * np.pi) - np.pi
+    theta[outside] = np.where(wrapped == -np.pi, np.pi, wrapped)
+    return theta
