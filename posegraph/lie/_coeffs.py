@@ -25,21 +25,36 @@ def series_terms(first_left_out: Callable[[int], float], below: float, most: int
     return next((n for n in range(most) if first_left_out(n) < below), most)
 
 
-def _even_series(theta_sq: np.ndarray, coefficients) -> np.ndarray:
-    """Σ_k c_k θ^{2k} for coefficients (k,), shaped as θ², or for each column of (k, n) at
-    once, (n, …). The powers are formed directly (a running product): θ² < 0.25 where a
-    series is used, and the terms fall fast."""
-    theta_sq = np.asarray(theta_sq, dtype=float)
-    coefficients = np.asarray(coefficients, dtype=float)
-    powers = np.empty((len(coefficients), theta_sq.size))
-    powers[0] = 1.0
-    for k in range(1, len(coefficients)):
-        np.multiply(powers[k - 1], theta_sq.reshape(-1), out=powers[k])
-    return (coefficients.T @ powers).reshape(coefficients.shape[1:] + theta_sq.shape)
+def powers(x: np.ndarray, count: int) -> np.ndarray:
+    """(count, …) array of xⁿ, n < count."""
+    out = np.empty((count,) + x.shape)
+    out[0] = 1.0
+    for n in range(1, count):  # faster than np.cumprod along the first axis
+        np.multiply(out[n - 1], x, out=out[n])
+    return out
+
+
+class EvenSeries:
+    """Σ_k c_k θ^{2k} for coefficients (k,), or for each column of (k, n) at once, summed up to
+    the first term below 1e-17 of the leading one at the largest θ² given (θ² < 0.25 where a
+    series is used, and the terms fall fast)."""
+
+    def __init__(self, coefficients) -> None:
+        self.coefficients = np.asarray(coefficients, dtype=float)
+        ratios = np.abs(self.coefficients / self.coefficients[0])
+        self._ratios = ratios.reshape(len(ratios), -1).max(axis=1).tolist()
+
+    def __call__(self, theta_sq: np.ndarray) -> np.ndarray:
+        """The sums, shaped as θ² for coefficients (k,), as (n, …) for (k, n)."""
+        theta_sq = np.asarray(theta_sq, dtype=float)
+        largest, ratios = float(theta_sq.max(initial=0.0)), self._ratios
+        terms = series_terms(lambda k: ratios[k] * largest**k, 1e-17, len(ratios))
+        sums = self.coefficients[:terms].T @ powers(theta_sq.reshape(-1), terms)
+        return sums.reshape(self.coefficients.shape[1:] + theta_sq.shape)
 
 
 def _coefficients(
-    theta: np.ndarray, closed_forms, series: np.ndarray, below: float = _SERIES_BELOW
+    theta: np.ndarray, closed_forms, series: EvenSeries, below: float = _SERIES_BELOW
 ) -> tuple[np.ndarray, ...]:
     """n coefficients of θ: ``closed_forms(θ)`` returns them as a tuple (sharing one sin and
     cos), and column k of ``series`` (terms, n) is the even series of the k-th, used where
@@ -50,20 +65,19 @@ def _coefficients(
         return closed_forms(theta)
     if small.all():
         theta_sq = theta * theta
-        return tuple(_even_series(theta_sq, series))
+        return tuple(series(theta_sq))
     coefficients = tuple(np.asarray(c) for c in closed_forms(np.where(small, 1.0, theta)))
     theta_sq = theta[small] ** 2
-    for values, out in zip(_even_series(theta_sq, series), coefficients, strict=True):
+    for values, out in zip(series(theta_sq), coefficients, strict=True):
         out[small] = values
     return coefficients
 
 
 def _coefficient(
-    theta: np.ndarray, closed_form, series, below: float = _SERIES_BELOW
+    theta: np.ndarray, closed_form, series: EvenSeries, below: float = _SERIES_BELOW
 ) -> np.ndarray:
-    """One coefficient: ``_coefficients`` with a single closed form and series (terms,)."""
-    column = np.asarray(series, dtype=float)[:, None]
-    return _coefficients(theta, lambda t: (closed_form(t),), column, below)[0]
+    """One coefficient: ``_coefficients`` with a single closed form and series (terms, 1)."""
+    return _coefficients(theta, lambda t: (closed_form(t),), series, below)[0]
 
 
 def _alternating(offset: int, terms: int = 8) -> list[float]:
@@ -71,7 +85,7 @@ def _alternating(offset: int, terms: int = 8) -> list[float]:
     return [(-1.0) ** k / factorial(2 * k + offset) for k in range(terms)]
 
 
-_ROTATION_SERIES = np.array([_alternating(1), _alternating(2), _alternating(3)]).T
+_ROTATION_SERIES = EvenSeries(np.array([_alternating(1), _alternating(2), _alternating(3)]).T)
 """Series of sin θ/θ, (1 − cos θ)/θ² and (θ − sin θ)/θ³, one per column."""
 
 
@@ -88,13 +102,15 @@ def rotation_coefficients(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np
     return _coefficients(theta, closed_forms, _ROTATION_SERIES)
 
 
-_Q_SERIES = np.array(
-    [
-        _alternating(3, terms=10),
-        _alternating(4, terms=10),
-        [(-1.0) ** k * (k + 1) / factorial(2 * k + 5) for k in range(10)],
-    ]
-).T
+_Q_SERIES = EvenSeries(
+    np.array(
+        [
+            _alternating(3, terms=10),
+            _alternating(4, terms=10),
+            [(-1.0) ** k * (k + 1) / factorial(2 * k + 5) for k in range(10)],
+        ]
+    ).T
+)
 """The three coefficients' series, one per column."""
 
 
@@ -114,7 +130,8 @@ def se3_q_coefficients(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nd
     return _coefficients(theta, closed_forms, _Q_SERIES, _Q_SERIES_BELOW)
 
 
-_JR_INV_SERIES = [1 / 12, 1 / 720, 1 / 30240, 1 / 1209600, 1 / 47900160]
+_JR_INV_TERMS = [1 / 12, 1 / 720, 1 / 30240, 1 / 1209600, 1 / 47900160]
+_JR_INV_SERIES = EvenSeries(_JR_INV_TERMS)
 """Series of (1 − (θ/2) cot(θ/2))/θ², from x cot x = 1 − Σ 2^{2n} |B_{2n}| x^{2n} / (2n)!."""
 
 
@@ -132,16 +149,16 @@ def so3_jr_inv_coefficient_from_trig(
     if not small.any():
         return (1.0 - 0.5 * theta * sin / (1.0 - cos)) / theta**2
     if small.all():
-        return _even_series(theta * theta, _JR_INV_SERIES)
+        return _JR_INV_SERIES(theta * theta)
     safe = np.where(small, 1.0, theta)
     result = np.asarray(
         (1.0 - 0.5 * safe * np.where(small, 0.0, sin) / np.where(small, 1.0, 1.0 - cos)) / safe**2
     )
-    result[small] = _even_series(theta[small] ** 2, _JR_INV_SERIES)
+    result[small] = _JR_INV_SERIES(theta[small] ** 2)
     return result
 
 
-_HALF_COT_SERIES = np.array([1.0, *(-c for c in _JR_INV_SERIES)])
+_HALF_COT_SERIES = EvenSeries(np.array([1.0, *(-c for c in _JR_INV_TERMS)])[:, None])
 
 
 def half_cot_half(theta: np.ndarray) -> np.ndarray:

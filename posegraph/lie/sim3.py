@@ -23,7 +23,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from ._coeffs import cross, hat3, series_terms, so3_polynomial, so3_polynomial_apply
+from ._coeffs import cross, hat3, powers, series_terms, so3_polynomial, so3_polynomial_apply
 from .base import LieGroup
 from .so3 import (
     angle,
@@ -102,15 +102,6 @@ m_k(σ) e^{−σ} = Σₙ k! |σ|ⁿ/(n + k + 1)! for σ < 0 (Kummer's transform
 positive, so each moment is summed without cancellation."""
 
 
-def _powers(x: np.ndarray, count: int) -> np.ndarray:
-    """(count, …) array of xⁿ, n < count."""
-    powers = np.empty((count,) + x.shape)
-    powers[0] = 1.0
-    for n in range(1, count):  # faster than np.cumprod along the first axis
-        np.multiply(powers[n - 1], x, out=powers[n])
-    return powers
-
-
 def _moments(sigma: np.ndarray, top: int) -> np.ndarray:
     """(top + 1, …) array of m_k(σ) = ∫₀¹ e^{σu} u^k du, k ≤ top.
 
@@ -122,9 +113,7 @@ def _moments(sigma: np.ndarray, top: int) -> np.ndarray:
     s = np.where(below, sigma, 0.0)
     x = np.abs(s)
     terms = _sigma_terms(x.max(initial=0.0))
-    positive, negative = (
-        series[: top + 1, :terms] @ _powers(x, terms) for series in _MOMENT_SERIES
-    )
+    positive, negative = (series[: top + 1, :terms] @ powers(x, terms) for series in _MOMENT_SERIES)
     moments = np.where(s < 0.0, negative * np.exp(s), positive)
     if below.all():
         return moments
@@ -145,9 +134,11 @@ def _small_angle_coefficients(
     terms = _theta_terms(float(theta.max(initial=0.0)))
     indices = _SERIES_FIRST_MOMENTS[:rows, None] + 2 * np.arange(terms)
     moments = _moments(sigma, int(indices.max()))
-    powers = _powers(theta * theta, terms)
+    theta_powers = powers(theta * theta, terms)
     sums = list(
-        np.einsum("sj,j...,sj...->s...", _SERIES_WEIGHTS[:rows, :terms], powers, moments[indices])
+        np.einsum(
+            "sj,j...,sj...->s...", _SERIES_WEIGHTS[:rows, :terms], theta_powers, moments[indices]
+        )
     )
     if not derivatives:
         return sums

@@ -325,15 +325,17 @@ def _accept(window: _Window, delta: np.ndarray, free: np.ndarray) -> None:
 def _solve(hessian, gradient: np.ndarray, damping: float, current: np.ndarray) -> np.ndarray | None:
     """The tangents that minimise the model plus ½ λ ‖δ − current‖²: (H + λI) δ = g + λ current;
     None where H + λI is not numerically positive definite."""
-    import scipy.linalg  # on use: a start without a fixed-lag smoother does without scipy
-
     rhs = gradient + damping * current
     if isinstance(hessian, np.ndarray):
-        damped = hessian + damping * np.eye(gradient.size)
-        try:
-            return scipy.linalg.cho_solve(scipy.linalg.cho_factor(damped), rhs)
-        except np.linalg.LinAlgError:
+        # LAPACK's Cholesky directly: scipy.linalg's wrappers cost more than a small window's
+        # factorisation, and numpy has no solve with a triangular factor.
+        from scipy.linalg import lapack  # on use: a start without a fixed-lag smoother does without
+
+        factor, failed = lapack.dpotrf(hessian + damping * np.eye(gradient.size), lower=True)
+        if failed:
             return None
+        step, _ = lapack.dpotrs(factor, rhs, lower=True)
+        return step
     import scipy.sparse.linalg
 
     damped = (hessian + damping * scipy.sparse.identity(gradient.size)).tocsc()

@@ -109,27 +109,21 @@ def _blocks(residuals, jac_i, jac_j, edges: EdgeSet, position: np.ndarray):
     edges (between if ``jac_j`` is given, else unary on ``edges.i``), over free nodes only."""
     information = edges.information
     weighted = np.einsum("mij,mj->mi", information, residuals)
-    ends = [(edges.i, jac_i)] + ([] if jac_j is None else [(edges.j, jac_j)])
-    rows, cols, blocks, nodes, pieces = [], [], [], [], []
-    for a, jac_a in ends:
-        free_a = position[a] >= 0
-        nodes.append(position[a][free_a])
-        pieces.append(-np.einsum("mji,mj->mi", jac_a, weighted)[free_a])
-        for b, jac_b in ends:
-            free = free_a & (position[b] >= 0)
-            rows.append(position[a][free])
-            cols.append(position[b][free])
-            blocks.append(np.swapaxes(jac_a[free], 1, 2) @ information[free] @ jac_b[free])
-    d = residuals.shape[-1]
+    count, d = residuals.shape
+    if jac_j is None:
+        ends, jacobians = edges.i[:, None], jac_i
+    else:
+        ends, jacobians = np.stack([edges.i, edges.j], axis=1), np.concatenate([jac_i, jac_j], 2)
+    k = ends.shape[1]
+    hessians = np.swapaxes(jacobians, 1, 2) @ information @ jacobians  # (m, k·d, k·d)
+    blocks = hessians.reshape(count, k, d, k, d).transpose(0, 1, 3, 2, 4)  # (m, a, b, d, d)
+    pieces = -np.einsum("mji,mj->mi", jacobians, weighted).reshape(count, k, d)
+    at = position[ends]  # (m, k)
+    rows = np.broadcast_to(at[:, :, None], (count, k, k))
+    cols = np.broadcast_to(at[:, None, :], (count, k, k))
+    free = (rows >= 0) & (cols >= 0)
     constant = 0.5 * float(np.einsum("mi,mi->", residuals, weighted))
-    return (
-        np.concatenate(rows),
-        np.concatenate(cols),
-        np.concatenate(blocks).reshape(-1, d, d),
-        np.concatenate(nodes),
-        np.concatenate(pieces).reshape(-1, d),
-        constant,
-    )
+    return rows[free], cols[free], blocks[free], at[at >= 0], pieces[at >= 0], constant
 
 
 def _embedded(matrix: np.ndarray, at: np.ndarray, size: int) -> scipy.sparse.csr_matrix:
