@@ -23,7 +23,9 @@ Mₑₑ is exact, from the joint covariance of each edge's two nodes (``posegrap
 their blocks of H⁻¹ lie in the pattern of H's factor, so CHOLMOD gives every edge's at once by
 selected inversion, at about the cost of a factorisation; SuperLU needs a solve per edge
 there. Pₑ and the cross terms lie outside
-H's pattern: for m candidates they take one solve of m·d columns, H⁻¹ Aᵀ, and are exact.
+H's pattern: for m candidates they take one solve of m·d columns, H⁻¹ Aᵀ, and are exact. With
+CHOLMOD, Pₑ of more candidates (up to ``SELECTED_COLUMNS`` columns) comes from selected
+inversion too, of H factorised on its pattern with the candidates' node pairs added.
 
 Beyond that, estimates: from K Rademacher probes z over the whitened rows and the one K-column
 solve w = H⁻¹ Aᵀ z, SuperLU's Mₑₑ of every edge, and Pₑ of candidates whose m·d columns exceed
@@ -53,6 +55,10 @@ PROBES = 256
 """Probes of the estimates, and the widest solve for exact innovations. At 32 a leverage of 0.7
 is off by ±0.08, and d² by up to two orders of magnitude where I − Mₑₑ is small (824 for a true
 5.3 on a generated graph); at 256 it is within ≈ 30% there (sphere2500's worst: 190%)."""
+SELECTED_COLUMNS = 2048
+"""Innovations of candidates of up to this many columns in all (m·d) are exact, by selected
+inversion (CHOLMOD), beyond the probes' width; beyond this, the fill of so many node pairs
+added to H's pattern costs more than the probes' solve (docs/benchmarks.md)."""
 SMALLEST_COMPLEMENT = 1e-3
 """Eigenvalues of I − Mₑₑ are clipped here: the estimate can reach 0 or below where Mₑₑ ≈ I."""
 
@@ -226,7 +232,8 @@ class Leverage:
     def innovations(self, candidates: EdgeSet) -> np.ndarray:
         """Innovation χ² of each edge of ``candidates`` (edges over the graph's nodes that it
         does not hold) against the solution: exact while their d columns in all are no more
-        than the probes (a solve as wide as the probes'), else estimated from the probes."""
+        than the probes (a solve as wide as the probes'), or with CHOLMOD no more than
+        ``SELECTED_COLUMNS`` (selected inversion), else estimated from the probes."""
         whitened, rows = _whitened(
             linearize_between(self.values, candidates), candidates.information
         )
@@ -235,6 +242,10 @@ class Leverage:
             cross = self._factored.cross_terms(candidates.i, candidates.j, rows)
             every = np.arange(count)
             predicted = cross.reshape(count, d, count, d)[every, :, every]  # Aₑ H⁻¹ Aₑᵀ
+        elif count * d <= SELECTED_COLUMNS and inverts_selectively(self.linear_solver):
+            ends = np.stack([candidates.i, candidates.j], axis=1)
+            system = _factorize(self.graph, self.values, self.linear_solver, ends).system
+            predicted = rows @ joint_covariances(system, ends) @ np.swapaxes(rows, 1, 2)
         else:
             samples = _rows_times(rows, candidates.i, candidates.j, self._probed[2])  # (m, d, K)
             predicted = samples @ np.swapaxes(samples, 1, 2) / self.probes
