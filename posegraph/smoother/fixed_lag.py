@@ -23,7 +23,7 @@ from ..lie import LieGroup
 from ..problem.factors import chi2
 from ..solvers import MAX_ITERATIONS, IterationRecord, Result, SolverOptions, Summary
 from . import warm_start
-from .marginal import DENSE_SIZE, GaussianPrior, marginalized, quadratic
+from .marginal import DENSE_SIZE, GaussianPrior, Quadratic, marginalized, quadratic
 
 INITIAL_DAMPING = 1e-5
 """λ at the start of each call; λ·I damps the step towards the current tangents, and grows or
@@ -276,7 +276,7 @@ def _optimize(window: _Window, options: SolverOptions, began: float):
         previous = error
         first = True
         while True:
-            step = _solve(model.hessian, model.gradient, damping, current)
+            step = _solve(model, damping, current)
             if step is None:  # not positive definite at this λ: a rejected step
                 step, trial = current, np.inf
             else:
@@ -322,22 +322,34 @@ def _accept(window: _Window, delta: np.ndarray, free: np.ndarray) -> None:
     window.delta[window.pinned] = delta[window.pinned]
 
 
-def _solve(hessian, gradient: np.ndarray, damping: float, current: np.ndarray) -> np.ndarray | None:
+def _solve(model: Quadratic, damping: float, current: np.ndarray) -> np.ndarray | None:
     """The tangents that minimise the model plus ½ λ ‖δ − current‖²: (H + λI) δ = g + λ current;
-    None where H + λI is not numerically positive definite."""
-    rhs = gradient + damping * current
+    None where H + λI is not numerically positive definite. A dense H is factorised by LAPACK's
+    Cholesky directly (scipy.linalg's wrappers cost more than a small window's factorisation),
+    as a band matrix where its band is narrower than half its size (a window's nodes are in
+    time order, and its measurements reach a few poses back)."""
+    hessian, rhs = model.hessian, model.gradient + damping * current
     if isinstance(hessian, np.ndarray):
-        # LAPACK's Cholesky directly: scipy.linalg's wrappers cost more than a small window's
-        # factorisation, and numpy has no solve with a triangular factor.
         from scipy.linalg import lapack  # on use: a start without a fixed-lag smoother does without
 
-        factor, failed = lapack.dpotrf(hessian + damping * np.eye(gradient.size), lower=True)
+        size, bandwidth = rhs.size, model.bandwidth
+        if 2 * bandwidth < size:
+            offsets = np.arange(bandwidth + 1)[:, None]
+            columns = np.arange(size)
+            rows = np.minimum(columns + offsets, size - 1)
+            band = np.where(columns + offsets < size, hessian[rows, columns], 0.0)
+            band[0] += damping  # LAPACK's lower band storage: band[i − j, j] = H[i, j]
+            factor, failed = lapack.dpbtrf(band, lower=1)
+            solve = lapack.dpbtrs
+        else:
+            factor, failed = lapack.dpotrf(hessian + damping * np.eye(size), lower=True)
+            solve = lapack.dpotrs
         if failed:
             return None
-        step, _ = lapack.dpotrs(factor, rhs, lower=True)
+        step, _ = solve(factor, rhs, lower=1)
         return step
     import scipy.sparse.linalg
 
-    damped = (hessian + damping * scipy.sparse.identity(gradient.size)).tocsc()
+    damped = (hessian + damping * scipy.sparse.identity(rhs.size)).tocsc()
     step = scipy.sparse.linalg.spsolve(damped, rhs)
     return step if np.isfinite(step).all() else None

@@ -39,11 +39,13 @@ class GaussianPrior:
 @dataclasses.dataclass(frozen=True)
 class Quadratic:
     """½ δᵀ H δ − gᵀ δ + c over the stacked tangents of n nodes (H n·d square): the
-    first-order model of measurements, ½ Σ ‖r + J δ‖²_Ω, around their linearisation point."""
+    first-order model of measurements, ½ Σ ‖r + J δ‖²_Ω, around their linearisation point.
+    H is zero more than ``bandwidth`` entries off its diagonal."""
 
     hessian: np.ndarray | scipy.sparse.csr_matrix
     gradient: np.ndarray
     constant: float
+    bandwidth: int
 
     def decrease(self, start: np.ndarray, end: np.ndarray) -> float:
         """How much the model falls from tangents ``start`` to ``end`` (stacked)."""
@@ -76,6 +78,7 @@ def quadratic(
     gradient = gradient.reshape(-1)
     constant = parts[0][5] + parts[1][5]
     hessian = _assembled(rows, cols, blocks, n)
+    reach = np.abs(rows - cols).max(initial=0)
     if prior is not None:
         at = (position[prior.nodes][:, None] * d + np.arange(d)).reshape(-1)
         if isinstance(hessian, np.ndarray):
@@ -84,21 +87,22 @@ def quadratic(
             hessian = hessian + _embedded(prior.hessian, at, n * d)
         gradient[at] += prior.gradient
         constant += prior.constant
-    return Quadratic(hessian, gradient, float(constant))
+        spanned = position[prior.nodes]
+        reach = max(reach, spanned.max(initial=0) - spanned.min(initial=0))
+    return Quadratic(hessian, gradient, float(constant), int(reach + 1) * d - 1)
 
 
 def _assembled(rows: np.ndarray, cols: np.ndarray, blocks: np.ndarray, n: int):
     """The n·d square matrix of (d, d) ``blocks`` summed at block ``rows`` and ``cols``: dense
     up to ``DENSE_SIZE`` unknowns, else sparse (CSR)."""
     d = blocks.shape[-1]
-    if n * d <= DENSE_SIZE:
-        dense = np.zeros((n * n, d, d))
-        np.add.at(dense, rows * n + cols, blocks)
-        return dense.reshape(n, n, d, d).transpose(0, 2, 1, 3).reshape(n * d, n * d)
-    import scipy.sparse  # on use: dense windows do without it
-
     entry_rows = (rows[:, None, None] * d + np.arange(d)[:, None]).repeat(d, axis=2)
     entry_cols = (cols[:, None, None] * d + np.arange(d)[None, :]).repeat(d, axis=1)
+    if n * d <= DENSE_SIZE:
+        flat = (entry_rows * (n * d) + entry_cols).ravel()
+        return np.bincount(flat, blocks.ravel(), (n * d) ** 2).reshape(n * d, n * d)
+    import scipy.sparse  # on use: dense windows do without it
+
     return scipy.sparse.coo_matrix(
         (blocks.ravel(), (entry_rows.ravel(), entry_cols.ravel())), shape=(n * d, n * d)
     ).tocsr()

@@ -23,8 +23,11 @@ TOLERANCE = 1e-6
 
 
 @pytest.mark.parametrize("group", [SE2, SE3], ids=["SE2", "SE3"])
-def test_fixed_lag_smoother_equals_gtsams_batch_fixed_lag_smoother(group):
-    stream, _ = visual_odometry(group, poses=60, reach=8, seed=0)
-    differences = lockstep(stream, lag=8).differences
+@pytest.mark.parametrize(("lag", "reach"), [(8, 8), (24, 4)], ids=["dense window", "band window"])
+def test_fixed_lag_smoother_equals_gtsams_batch_fixed_lag_smoother(group, lag, reach):
+    """Mostly band solves (24 poses whose measurements reach 3 back) and mostly dense ones (8
+    poses whose measurements reach up to 7 back)."""
+    stream, _ = visual_odometry(group, poses=60, reach=reach, seed=0)
+    differences = lockstep(stream, lag=lag).differences
     assert len(differences) == 60
     assert max(max(pair) for pair in differences) < TOLERANCE
