@@ -64,8 +64,7 @@ def _coefficients(
     if not small.any():
         return closed_forms(theta)
     if small.all():
-        theta_sq = theta * theta
-        return tuple(series(theta_sq))
+        return tuple(series(theta * theta))
     coefficients = tuple(np.asarray(c) for c in closed_forms(np.where(small, 1.0, theta)))
     theta_sq = theta[small] ** 2
     for values, out in zip(series(theta_sq), coefficients, strict=True):

@@ -347,7 +347,7 @@ def _solve(model: Quadratic, damping: float, current: np.ndarray) -> np.ndarray 
         if failed:
             return None
         step, _ = solve(factor, rhs, lower=1)
-        return step
+        return step if np.isfinite(step).all() else None
     import scipy.sparse.linalg
 
     damped = (hessian + damping * scipy.sparse.identity(rhs.size)).tocsc()

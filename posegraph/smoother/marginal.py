@@ -87,8 +87,7 @@ def quadratic(
             hessian = hessian + _embedded(prior.hessian, at, n * d)
         gradient[at] += prior.gradient
         constant += prior.constant
-        spanned = position[prior.nodes]
-        reach = max(reach, spanned.max(initial=0) - spanned.min(initial=0))
+        reach = max(reach, np.ptp(position[prior.nodes]))
     return Quadratic(hessian, gradient, float(constant), int(reach + 1) * d - 1)
 
 
