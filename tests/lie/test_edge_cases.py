@@ -14,6 +14,12 @@ import pytest
 import scipy.linalg
 
 from posegraph.lie import SE2, SE3, SO2, SO3, LieGroup, Sim3
+from posegraph.lie._coeffs import (
+    half_cot_half,
+    rotation_coefficients,
+    se3_q_coefficients,
+    so3_jr_inv_coefficient,
+)
 from posegraph.lie.base import integral_of_exp
 from posegraph.lie.sim3 import _moments, w_derivatives
 from posegraph.lie.so3 import project_to_rotation
@@ -307,6 +313,71 @@ def test_sim3_series_take_the_terms_the_largest_value_of_the_batch_needs():
     batch = np.array(w_derivatives(sigma, theta))
     alone = np.array([w_derivatives(s, t) for s, t in zip(sigma, theta, strict=True)]).T
     np.testing.assert_allclose(batch, alone, rtol=1e-15, atol=0)
+
+
+def _exact_trig(angle: float, digits: int = 60) -> tuple[Decimal, Decimal, Decimal]:
+    """θ, sin θ and cos θ in ``digits`` digits, by their Taylor series."""
+    with localcontext() as context:
+        context.prec = digits
+        t = Decimal(angle)
+        sin = sum((-1) ** k * t ** (2 * k + 1) / factorial(2 * k + 1) for k in range(60))
+        cos = sum((-1) ** k * t ** (2 * k) / factorial(2 * k) for k in range(60))
+        return t, sin, cos
+
+
+def _exact_coefficients(angle: float) -> list[float]:
+    """The closed forms of ``_coeffs``' coefficients in 60 digits, where none cancels: those
+    of ``rotation_coefficients``, ``se3_q_coefficients``, ``so3_jr_inv_coefficient`` and
+    ``half_cot_half``."""
+    t, sin, cos = _exact_trig(angle)
+    with localcontext() as context:
+        context.prec = 60
+        return [
+            float(value)
+            for value in (
+                sin / t,
+                (1 - cos) / t**2,
+                (t - sin) / t**3,
+                (t - sin) / t**3,
+                (t**2 + 2 * cos - 2) / (2 * t**4),
+                (2 * t - 3 * sin + t * cos) / (2 * t**5),
+                (1 - t * sin / (2 * (1 - cos))) / t**2,
+                t * sin / (2 * (1 - cos)),
+            )
+        ]
+
+
+def _coefficients(angle: np.ndarray) -> np.ndarray:
+    """The same from ``_coeffs``, (8, …): the Q coefficients repeat (θ − sin θ)/θ³."""
+    return np.array(
+        [
+            *rotation_coefficients(angle),
+            *se3_q_coefficients(angle),
+            so3_jr_inv_coefficient(angle),
+            half_cot_half(angle),
+        ]
+    )
+
+
+@pytest.mark.parametrize("angle", [1e-8, 1e-4, 0.05, 0.099, 0.101, 0.3, 0.499, 0.501, 1.0, 3.0])
+def test_rotation_coefficients_match_exact_references(angle):
+    """The SO(3)/SE(3) coefficients and SE(2)'s (θ/2) cot(θ/2) against their closed forms in 60
+    digits: to 3e-15 relative where a series sums them (θ < 0.1, the Q coefficients θ < 0.5),
+    and 1e-11 where a closed form cancels just above its switch (jr⁻¹'s φ×² coefficient at
+    θ = 0.101: 7.6e-12, on a term θ² times smaller than the identity it is added to)."""
+    exact = np.array(_exact_coefficients(angle))
+    computed = _coefficients(np.array(angle))
+    series = np.array([angle < 0.1] * 3 + [angle < 0.5] * 3 + [angle < 0.1] * 2)
+    tolerance = np.where(series, 3e-15, 1e-11)
+    assert np.all(np.abs(computed - exact) <= tolerance * np.abs(exact))
+
+
+def test_rotation_series_take_the_terms_the_largest_angle_of_the_batch_needs():
+    """A batch of angles below the switches sums as many terms as its largest needs: each
+    element equals the element evaluated alone (with its own, fewer terms)."""
+    angles = np.array([1e-9, 0.09, 1e-4, 0.02, 0.0])
+    alone = np.array([_coefficients(np.array(a)) for a in angles]).T
+    np.testing.assert_allclose(_coefficients(angles), alone, rtol=1e-15, atol=0)
 
 
 def test_integral_of_exp_matches_van_loans_block_exponential():
