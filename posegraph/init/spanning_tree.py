@@ -131,9 +131,12 @@ def spanning_tree(
 ) -> SpanningTree:
     """The minimum spanning tree of ``edge_weights`` (see ``SpanningTree``); ``known`` marks
     nodes hung from the root."""
+    n = graph.num_nodes
+    if graph.num_edges == 0:  # every node hangs from the root: no tree to search
+        none = np.zeros(0, dtype=np.int64)
+        return SpanningTree(np.full(n + 1, n), none, none, np.zeros(0, dtype=bool))
     import scipy.sparse.csgraph  # on use: an SE2 or SE3 chordal start does without scipy
 
-    n = graph.num_nodes
     known = np.zeros(n, dtype=bool) if known is None else np.asarray(known, dtype=bool)
     i, j = graph.edges.i, graph.edges.j
     weights = edge_weights(graph, prefer)
