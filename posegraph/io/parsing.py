@@ -96,7 +96,7 @@ which then read the graph without it; posegraph reads it back as rejected
 (``ReadResult.rejected``)."""
 
 
-def code_lines(path: str, rejected: set[int] | None = None) -> Iterator[tuple[int, str]]:
+def code_lines(path: str, rejected: set[int] | None = None) -> list[tuple[int, str]]:
     """(line number, text before any ``#``) of every line that is not blank or a comment.
     UTF-8, with or without a byte-order mark. Lines end at ``\n`` alone, as g2o, gtsam and
     editors count them (a form feed or U+2028 inside a line or a comment does not end it).
@@ -112,13 +112,15 @@ def code_lines(path: str, rejected: set[int] | None = None) -> Iterator[tuple[in
         raise GraphFileError(path, None, "is not a text file") from None
     except OSError as error:
         raise GraphFileError(path, None, f"cannot be read ({error.strerror})") from None
-    for number, line in enumerate(text.split("\n"), start=1):
-        if rejected is not None and line.startswith(REJECTED_PREFIX):
-            line = line[len(REJECTED_PREFIX) :]
-            rejected.add(number)
-        code = line.partition("#")[0]
-        if code and not code.isspace():
-            yield number, code
+    lines = text.split("\n")
+    if rejected is not None and REJECTED_PREFIX in text:
+        for index, line in enumerate(lines):
+            if line.startswith(REJECTED_PREFIX):
+                lines[index] = line[len(REJECTED_PREFIX) :]
+                rejected.add(index + 1)
+    if "#" in text:
+        lines = [line.partition("#")[0] for line in lines]
+    return [(number, code) for number, code in enumerate(lines, 1) if code and not code.isspace()]
 
 
 @paused_garbage_collection()
@@ -143,11 +145,8 @@ def read_tagged_lines(path: str, rejected: set[int] | None = None) -> list[tuple
     """(line number, tag, the text after the tag) of every line that is not blank or a
     comment, as ``read_lines`` finds them: three objects a line instead of one a token. Lines
     marked rejected are read too, their numbers added to ``rejected`` (``code_lines``)."""
-    tagged = []
-    for number, code in code_lines(path, rejected):
-        tag, *rest = code.split(None, 1)
-        tagged.append((number, tag, rest[0] if rest else ""))
-    return tagged
+    split = ((number, code.split(None, 1)) for number, code in code_lines(path, rejected))
+    return [(number, words[0], words[1] if len(words) == 2 else "") for number, words in split]
 
 
 def to_rows(

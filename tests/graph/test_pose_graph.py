@@ -11,6 +11,7 @@ import pytest
 
 import posegraph
 from posegraph.graph import PoseGraph
+from posegraph.graph.pose_graph import LOOKED_UP
 from posegraph.lie import SE2, SE3, Sim3
 from posegraph.problem.factors import between_squares
 
@@ -223,6 +224,26 @@ def test_node_ids_are_whole_numbers_of_at_most_64_bits():
         with pytest.raises(ValueError, match=message):
             graph.index(ids)
     assert graph.num_nodes == 3
+
+
+def test_many_node_ids_are_indexed_as_one_by_one():
+    """Beyond ``LOOKED_UP`` ids, ``index`` searches the sorted node ids: the same indices as
+    looked up one by one (ids out of order, negative, up to 2⁶³ − 1, repeated), and the same
+    error, naming the first unknown id."""
+    rng = np.random.default_rng(5)
+    ids = rng.choice(np.arange(-(2**40), 2**40, 2**20), size=300, replace=False)
+    ids[7] = 2**63 - 1
+    graph = PoseGraph(SE2)
+    graph.add_nodes(ids)
+    queried = rng.choice(ids, size=LOOKED_UP * 4)
+    one_by_one = [int(graph.index([k])[0]) for k in queried.tolist()]
+    assert graph.index(queried).tolist() == one_by_one
+    assert [ids[k] for k in one_by_one] == queried.tolist()
+    unknown = queried.copy()
+    unknown[[50, 200]] = [12345, 2**62]
+    for many in (unknown, unknown[:LOOKED_UP]):
+        with pytest.raises(KeyError, match="node 12345 is not in the graph"):
+            graph.index(many)
 
 
 def test_edges_are_removed_by_index_or_mask_and_counts_must_agree():
