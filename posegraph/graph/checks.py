@@ -32,6 +32,27 @@ def node_id_array(node_ids: Iterable[int] | np.ndarray | int) -> np.ndarray:
     return given.astype(np.int64)
 
 
+LOOKED_UP = 64
+"""``indices_of`` looks up to this many ids one by one in a dict; more are searched for among
+the sorted node ids at once (a file's edge ends: one search, not a lookup each)."""
+
+
+def indices_of(ids: np.ndarray, known: np.ndarray, index_of: dict[int, int]) -> np.ndarray:
+    """Where each of ``ids`` lies among the distinct ``known`` node ids (``index_of`` maps each
+    to its place); ``KeyError`` naming the first id not among them."""
+    if ids.size > LOOKED_UP and known.size:
+        order = np.argsort(known)
+        found = order[np.searchsorted(known, ids, sorter=order).clip(max=known.size - 1)]
+        unknown = known[found] != ids
+        if unknown.any():
+            raise KeyError(f"node {ids[unknown][0]} is not in the graph")
+        return found
+    try:
+        return np.fromiter((index_of[k] for k in ids.tolist()), np.int64, ids.size)
+    except KeyError as error:
+        raise KeyError(f"node {error.args[0]} is not in the graph") from None
+
+
 def named_nodes(node_ids: np.ndarray, shown: int = 3) -> str:
     """Node ids as a phrase: "node 4", or "nodes 4, 6, 8, … (20 nodes)" past ``shown``."""
     named = ", ".join(str(node) for node in node_ids[:shown])

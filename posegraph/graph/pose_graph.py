@@ -18,13 +18,9 @@ from collections.abc import Callable, Iterable
 import numpy as np
 
 from ..lie import SE2, SE3, LieGroup, Sim3
-from .checks import as_elements, as_information, node_id_array, refuse_overflowing
+from .checks import as_elements, as_information, indices_of, node_id_array, refuse_overflowing
 from .components import connected_components
 from .edges import EdgeSet, measurement_mask, renumbered
-
-LOOKED_UP = 64
-"""``PoseGraph.index`` looks up to this many ids one by one in a dict; more are searched for
-among the sorted node ids at once (a file's edge ends: one search, not a lookup each)."""
 
 POSE_GROUPS: tuple[type[LieGroup], ...] = (SE2, SE3, Sim3)
 
@@ -122,21 +118,8 @@ class PoseGraph:
         return int(node_id) in self._index_of
 
     def index(self, node_ids: Iterable[int] | np.ndarray | int) -> np.ndarray:
-        """Indices of node ids; raises ``KeyError`` naming the first unknown id. Many ids are
-        searched for among the sorted node ids, a few looked up one by one."""
-        ids = node_id_array(node_ids)
-        if ids.size > LOOKED_UP and self.num_nodes:
-            known = self.node_ids
-            order = np.argsort(known)
-            found = order[np.searchsorted(known, ids, sorter=order).clip(max=known.size - 1)]
-            unknown = known[found] != ids
-            if unknown.any():
-                raise KeyError(f"node {ids[unknown][0]} is not in the graph")
-            return found
-        try:
-            return np.fromiter((self._index_of[k] for k in ids.tolist()), np.int64, ids.size)
-        except KeyError as error:
-            raise KeyError(f"node {error.args[0]} is not in the graph") from None
+        """Indices of node ids; raises ``KeyError`` naming the first unknown id."""
+        return indices_of(node_id_array(node_ids), self.node_ids, self._index_of)
 
     def values_of(self, node_ids) -> LieGroup:
         """The current values of some nodes, stacked in the order given."""

@@ -11,7 +11,7 @@ import pytest
 
 import posegraph
 from posegraph.graph import PoseGraph
-from posegraph.graph.pose_graph import LOOKED_UP
+from posegraph.graph.checks import LOOKED_UP
 from posegraph.lie import SE2, SE3, Sim3
 from posegraph.problem.factors import between_squares
 
