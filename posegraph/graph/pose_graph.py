@@ -13,7 +13,7 @@ edit it and optimise again. It holds data only: what a solver reuses between cal
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable
 
 import numpy as np
 
@@ -21,32 +21,9 @@ from ..lie import SE2, SE3, LieGroup, Sim3
 from .checks import as_elements, as_information, indices_of, node_id_array, refuse_overflowing
 from .components import connected_components
 from .edges import EdgeSet, measurement_mask, renumbered
+from .stacked import Stacked
 
 POSE_GROUPS: tuple[type[LieGroup], ...] = (SE2, SE3, Sim3)
-
-
-class _Stacked:
-    """A stacked value (an array, group elements or an ``EdgeSet``) and the parts appended to
-    it since it was last read. Appending costs O(1); the first read joins them all at once, so a
-    loop that adds one node and edge at a time is linear, not quadratic."""
-
-    __slots__ = ("_value", "_parts", "_join", "length")
-
-    def __init__(self, value, join: Callable[[list], object]) -> None:
-        self._join = join
-        self.set(value)
-
-    def set(self, value) -> None:
-        self._value, self._parts, self.length = value, [], len(value)
-
-    def append(self, part) -> None:
-        self._parts.append(part)
-        self.length += len(part)
-
-    def get(self):
-        if self._parts:
-            self._value, self._parts = self._join([self._value, *self._parts]), []
-        return self._value
 
 
 def _stacked(name: str, doc: str | None = None) -> property:
@@ -80,12 +57,12 @@ class PoseGraph:
             )
         self.group = group
         self._stacks = {
-            "node_ids": _Stacked(np.zeros(0, dtype=np.int64), np.concatenate),
-            "values": _Stacked(group.identity((0,)), group.concatenate),
-            "edges": _Stacked(EdgeSet.empty(group), EdgeSet.joined),
-            "priors": _Stacked(EdgeSet.empty(group), EdgeSet.joined),
-            "fixed": _Stacked(np.zeros(0, dtype=bool), np.concatenate),
-            "initialized": _Stacked(np.zeros(0, dtype=bool), np.concatenate),
+            "node_ids": Stacked(np.zeros(0, dtype=np.int64)),
+            "values": Stacked(group.identity((0,))),
+            "edges": Stacked(EdgeSet.empty(group)),
+            "priors": Stacked(EdgeSet.empty(group)),
+            "fixed": Stacked(np.zeros(0, dtype=bool)),
+            "initialized": Stacked(np.zeros(0, dtype=bool)),
         }
         self.equivalences = np.zeros((0, 2), dtype=np.int64)
         """TORO ``EQUIV`` pairs of node ids: kept for round trips, not constraints (as gtsam)."""
