@@ -168,8 +168,8 @@ class NormalEquations(BlockPattern):
         between edge), written straight into the stacked buffer that ``matrix_data`` sums."""
         cut = 4 * len(between.residuals) * self.dof**2
         blocks = np.empty(cut + len(priors.residuals) * self.dof**2)
-        _products(between.jacobians, between_information, between.jacobians, blocks[:cut])
-        _products(priors.jacobians, prior_information, priors.jacobians, blocks[cut:])
+        _products(between.jacobians, between_information, blocks[:cut])
+        _products(priors.jacobians, prior_information, blocks[cut:])
         return self.matrix_data(blocks)
 
     def gradient(
@@ -194,8 +194,9 @@ class NormalEquations(BlockPattern):
         return self.vector(pieces)
 
 
-def _products(left: np.ndarray, information: np.ndarray, right: np.ndarray, out: np.ndarray):
-    """Write Lᵀ Ω R of every measurement into the flat buffer ``out`` (batched products: faster
+def _products(jacobians: np.ndarray, information: np.ndarray, out: np.ndarray) -> None:
+    """Write Jᵀ Ω J of every measurement into the flat buffer ``out`` (batched products: faster
     than ``einsum`` for these matrices, slower for the gradient's vectors)."""
-    shape = (left.shape[0], left.shape[2], right.shape[2])
-    np.matmul(np.swapaxes(left, 1, 2), information @ right, out=out.reshape(shape))
+    width = jacobians.shape[2]
+    out = out.reshape(jacobians.shape[0], width, width)
+    np.matmul(np.swapaxes(jacobians, 1, 2), information @ jacobians, out=out)
