@@ -12,7 +12,6 @@ import hashlib
 import os
 import shutil
 import tempfile
-import urllib.request
 from pathlib import Path
 
 from posegraph.io.atomic import atomic_path
@@ -90,6 +89,8 @@ def download(file: str, folder: Path | None = None) -> tuple[Path, bool]:
     """Fetch one graph (by file name: ``graph_name``) into ``folder`` (``download_dir()``),
     unless it is there already; returns its path and whether it was fetched. The file appears
     only once its SHA-256 is the expected one."""
+    import urllib.request  # on use: every command imports this module, few fetch
+
     folder = download_dir() if folder is None else folder
     path = folder / file
     if is_present(file, folder):

@@ -24,9 +24,6 @@ import numpy as np
 TRIANGULAR_LEAF = 64
 """Lower-triangular blocks up to this width are inverted by numpy's LU ``inv``; wider ones by
 halves (``_triangular_inverse``)."""
-SCATTERED = 8
-"""Groups of more supernodes than this are written into a buffer by one scatter; fewer, block
-by block (``_write``)."""
 
 
 class SupernodalFactor:
@@ -54,9 +51,7 @@ class SupernodalFactor:
         while np.any(ancestor >= 0):
             self.depth += ancestor >= 0
             ancestor = np.where(ancestor >= 0, self.parent[ancestor], -1)
-        # An inverse is kept as one flat buffer: supernode s's (height, width) row-major block
-        # at offset[s]. Row keys s·n + row of every supernode, sorted, locate entries in it.
-        self.offset = np.concatenate([[0], np.cumsum(self.height * self.width)])
+        # Row keys s·n + row of every supernode, sorted, locate a row among its rows.
         self._row_offset = np.concatenate([[0], np.cumsum(self.height)])
         supernode = np.repeat(np.arange(self.first.size), self.height)
         within = np.arange(self._row_offset[-1]) - self._row_offset[supernode]
@@ -66,10 +61,6 @@ class SupernodalFactor:
         """Row indices of supernode s: its own columns, then the rows R below them."""
         start = self._indptr[self.first[s]]
         return self._indices[start : start + self.height[s]]
-
-    def block(self, buffer: np.ndarray, s: int) -> np.ndarray:
-        """Supernode s's (height, width) view into an inverse's ``buffer``."""
-        return buffer[self.offset[s] : self.offset[s + 1]].reshape(self.height[s], self.width[s])
 
     def path_to_root(self, columns: np.ndarray) -> np.ndarray:
         """The supernodes holding ``columns`` and all their ancestors, in increasing order."""
@@ -87,24 +78,28 @@ class SupernodalFactor:
         found = np.minimum(np.searchsorted(self._row_keys, keys), self._row_keys.size - 1)
         return np.where(self._row_keys[found] == keys, found - self._row_offset[supernodes], -1)
 
-    def positions(self, rows: np.ndarray, columns: np.ndarray) -> np.ndarray:
-        """Positions in an inverse's buffer of entries (rows ≥ columns); ``ValueError`` if one
-        is outside L's pattern."""
+    def locate(self, rows: np.ndarray, columns: np.ndarray) -> tuple[np.ndarray, ...]:
+        """The supernode of each entry (rows ≥ columns), its row among the supernode's rows and
+        its column among its columns; ``ValueError`` if one is outside L's pattern."""
         s = self.supernode_of[columns]
-        row = self.rows_within(s, rows)
+        row = rows - self.first[s]  # right for rows among the supernode's own columns
+        below = row >= self.width[s]
+        row[below] = self.rows_within(s[below], rows[below])
         if np.any(row < 0):
             k = int(np.flatnonzero(row < 0)[0])
             raise ValueError(f"entry ({rows[k]}, {columns[k]}) is outside the factor's pattern")
-        return self.offset[s] + row * self.width[s] + columns - self.first[s]
+        return s, row, columns - self.first[s]
 
 
 def _lower_blocks(factor: SupernodalFactor, supernodes: np.ndarray, height: int, width: int):
     """L's dense (g, height, width) blocks of supernodes of one shape (zero above the diagonal):
-    column c of a supernode holds its rows from the c-th on, contiguous in L's data."""
+    column c of a supernode holds its rows from the c-th on, height − c entries that follow
+    column c − 1's in L's data."""
     row, column = np.arange(height)[:, None], np.arange(width)[None, :]
-    starts = factor._indptr[factor.first[supernodes][:, None] + np.arange(width)]  # (g, width)
-    index = starts[:, None, :] + np.maximum(row - column, 0)
-    return np.where(row >= column, factor._data[index], 0.0)
+    within = column * height - column * (column - 1) // 2 + np.maximum(row - column, 0)
+    lower = factor._data.take(factor._indptr[factor.first[supernodes]][:, None, None] + within)
+    lower[:, :width] *= row[:width] >= column
+    return lower
 
 
 def _triangular_inverse(lower: np.ndarray) -> np.ndarray:
@@ -122,69 +117,98 @@ def _triangular_inverse(lower: np.ndarray) -> np.ndarray:
     return inverse
 
 
-def _write(buffer: np.ndarray, starts: np.ndarray, blocks: np.ndarray) -> None:
-    """Each of the stacked ``blocks`` (g, ...), flattened, into ``buffer`` from its start: as
-    slices where there are few (a large block's scatter would index every entry), else by one
-    scatter."""
-    flat = blocks.reshape(blocks.shape[0], -1)
-    if flat.shape[0] > SCATTERED:
-        buffer[starts[:, None] + np.arange(flat.shape[1])] = flat
-        return
-    for start, block in zip(starts.tolist(), flat, strict=True):
-        buffer[start : start + block.size] = block
+class SelectedInverse:
+    """Σ = (L Lᵀ)⁻¹ in L's pattern, in the supernodes that ``selected_inverse`` computed: the
+    (height, width) block of each, row-major, from ``offset[s]`` in one buffer (−1 for those
+    not computed)."""
+
+    def __init__(self, factor: SupernodalFactor, buffer: np.ndarray, offset: np.ndarray) -> None:
+        self.factor, self.buffer, self.offset = factor, buffer, offset
+
+    def block(self, s: int) -> np.ndarray:
+        """Supernode s's (height, width) block, a view."""
+        size = self.factor.height[s] * self.factor.width[s]
+        return self.buffer[self.offset[s] : self.offset[s] + size].reshape(
+            self.factor.height[s], self.factor.width[s]
+        )
+
+    def entries(self, rows: np.ndarray, columns: np.ndarray) -> np.ndarray:
+        """Σ's entries (rows ≥ columns); ``ValueError`` if one is outside L's pattern or in a
+        supernode not computed."""
+        s, row, column = self.factor.locate(rows, columns)
+        if np.any(self.offset[s] < 0):
+            raise ValueError("an entry lies in a supernode whose inverse was not computed")
+        return self.buffer[self.offset[s] + row * self.factor.width[s] + column]
 
 
-def _fronts(factor: SupernodalFactor, needed: np.ndarray) -> tuple[np.ndarray, dict]:
-    """Where each parent among the ``needed`` supernodes keeps its front Σ[rows(s), rows(s)],
-    (height, height) row-major, in the flat buffer of its depth: the offsets (−1 for
-    supernodes that are no parent) and one empty buffer per depth."""
-    parent = factor.parent[needed]
-    parents = np.unique(parent[parent >= 0])
-    offsets = np.full(factor.first.size, -1)
-    buffers = {}
-    for depth in np.unique(factor.depth[parents]).tolist():
-        at = parents[factor.depth[parents] == depth]
-        sizes = factor.height[at] ** 2
-        offsets[at] = np.cumsum(sizes) - sizes
-        buffers[depth] = np.empty(int(sizes.sum()))
-    return offsets, buffers
+class _Fronts:
+    """The fronts Σ[rows(s), rows(s)] of computed parents, (g, height, height) per group of
+    supernodes computed together, kept until the children below them have read their Σ_RR."""
+
+    def __init__(self, factor: SupernodalFactor, needed: np.ndarray) -> None:
+        self.factor = factor
+        self.is_parent = np.zeros(factor.first.size, dtype=bool)
+        self.is_parent[factor.parent[needed][factor.parent[needed] >= 0]] = True
+        self.group = np.full(factor.first.size, -1)
+        self.slot = np.full(factor.first.size, -1)
+        self.kept: dict[int, tuple[int, np.ndarray]] = {}
+
+    def keep(self, index: int, depth: int, supernodes: np.ndarray, front: np.ndarray) -> None:
+        """Keep group ``index``'s fronts if a supernode of it is a parent, and drop those two
+        levels up, whose children have all been computed."""
+        for old in [k for k, (at, _) in self.kept.items() if at < depth - 1]:
+            del self.kept[old]
+        if self.is_parent[supernodes].any():
+            self.group[supernodes], self.slot[supernodes] = index, np.arange(supernodes.size)
+            self.kept[index] = (depth, front)
+
+    def lower_right(self, supernodes: np.ndarray, rows: np.ndarray, out: np.ndarray) -> None:
+        """Σ_RR of ``supernodes`` (rows R below each, (g, r)) into ``out`` (g, r, r), read from
+        their parents' fronts: each of R's rows looked up once among the parent's rows."""
+        parent = self.factor.parent[supernodes]
+        within = self.factor.rows_within(parent[:, None], rows)
+        groups = self.group[parent]
+        first, last = int(groups.min()), int(groups.max())
+        for group in [first] if first == last else np.unique(groups).tolist():
+            take = slice(None) if first == last else groups == group
+            fronts = self.kept[group][1]
+            size = fronts.shape[1]
+            rows = (self.slot[parent[take]] * size)[:, None] + within[take]
+            out[take] = fronts.take(rows[:, :, None] * size + within[take][:, None, :])
 
 
-def selected_inverse(factor: SupernodalFactor, columns: np.ndarray) -> np.ndarray:
-    """Σ = (L Lᵀ)⁻¹ in L's pattern (a buffer laid out by ``factor.offset``), computed in the
-    supernodes that hold ``columns`` and their ancestors; zero elsewhere."""
-    inverse = np.zeros(factor.offset[-1])
+def selected_inverse(factor: SupernodalFactor, columns: np.ndarray) -> SelectedInverse:
+    """Σ = (L Lᵀ)⁻¹ in L's pattern, computed in the supernodes that hold ``columns`` and their
+    ancestors."""
     needed = factor.path_to_root(columns)
-    front_offsets, fronts = _fronts(factor, needed)
     shapes = np.stack([factor.depth[needed], factor.width[needed], factor.height[needed]])
     keys, group = np.unique(shapes, axis=1, return_inverse=True)
-    for index, (depth, width, height) in enumerate(keys.T):  # by depth, from the root down
-        supernodes = needed[group.ravel() == index]
+    group = group.ravel()
+    in_order = needed[np.argsort(group, kind="stable")]  # by group; a group's sorted within
+    sizes = factor.height[in_order] * factor.width[in_order]
+    offset = np.full(factor.first.size, -1)
+    offset[in_order] = np.cumsum(sizes) - sizes
+    buffer = np.empty(int(sizes.sum()))
+    fronts = _Fronts(factor, needed)
+    for index, (depth, width, height) in enumerate(keys.T.tolist()):  # from the root down
+        supernodes = needed[group == index]
         lower = _lower_blocks(factor, supernodes, height, width)
         diagonal_inverse = _triangular_inverse(lower[:, :width])  # L_CC⁻¹
         front = np.empty((supernodes.size, height, height))
         front[:, :width, :width] = np.swapaxes(diagonal_inverse, 1, 2) @ diagonal_inverse
         if height > width:
-            parent = factor.parent[supernodes]
             first_entries = factor._indptr[factor.first[supernodes]]
             rows = factor._indices[first_entries[:, None] + np.arange(width, height)]
-            within = factor.rows_within(parent[:, None], rows)  # R among the parent's rows
-            places = (
-                front_offsets[parent][:, None, None]
-                + within[:, :, None] * factor.height[parent][:, None, None]
-                + within[:, None, :]
-            )
-            front[:, width:, width:] = fronts[depth - 1][places]  # Σ_RR
+            fronts.lower_right(supernodes, rows, front[:, width:, width:])  # Σ_RR
             u = lower[:, width:] @ diagonal_inverse
             front[:, width:, :width] = -front[:, width:, width:] @ u  # Σ_RC
             front[:, :width, :width] -= np.swapaxes(u, 1, 2) @ front[:, width:, :width]
             front[:, :width, width:] = np.swapaxes(front[:, width:, :width], 1, 2)
-        _write(inverse, factor.offset[supernodes], front[:, :, :width])
-        kept = front_offsets[supernodes] >= 0
-        if kept.any():
-            _write(fronts[depth], front_offsets[supernodes[kept]], front[kept])
-        fronts.pop(depth - 2, None)  # the grandparents' fronts have served their last children
-    return inverse
+        start = offset[supernodes[0]]
+        stacked = buffer[start : start + supernodes.size * height * width]
+        stacked.reshape(supernodes.size, height, width)[...] = front[:, :, :width]
+        fronts.keep(index, depth, supernodes, front)
+    return SelectedInverse(factor, buffer, offset)
 
 
 def inverse_blocks(factor: SupernodalFactor, groups: np.ndarray) -> np.ndarray:
@@ -194,7 +218,7 @@ def inverse_blocks(factor: SupernodalFactor, groups: np.ndarray) -> np.ndarray:
     count, size = groups.shape
     a, b = np.tril_indices(size)  # a block is symmetric: its lower triangle is looked up
     rows, columns = groups[:, a].ravel(), groups[:, b].ravel()
-    lower = inverse[factor.positions(np.maximum(rows, columns), np.minimum(rows, columns))]
+    lower = inverse.entries(np.maximum(rows, columns), np.minimum(rows, columns))
     blocks = np.empty((count, size, size))
     blocks[:, a, b] = blocks[:, b, a] = lower.reshape(count, a.size)
     return blocks

@@ -48,7 +48,7 @@ def _assert_inverse_in_pattern(matrix: np.ndarray, factor: SupernodalFactor, rto
     for s in range(factor.first.size):
         columns = np.arange(factor.first[s], factor.first[s] + factor.width[s])
         expected = inverse[np.ix_(factor.rows(s), columns)]
-        np.testing.assert_allclose(factor.block(computed, s), expected, rtol=rtol, atol=1e-13)
+        np.testing.assert_allclose(computed.block(s), expected, rtol=rtol, atol=1e-13)
 
 
 def test_selected_inverse_is_the_inverse_in_the_factors_pattern():
