@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .cvxopt_import import import_cholmod
 from .selected_inversion import SupernodalFactor, inverse_blocks
 
 if TYPE_CHECKING:
@@ -115,7 +116,8 @@ class CholmodCholesky:
         ``covariance_blocks`` needs. ``previous`` is a factoriser for a leading part of this
         pattern, or for the same one (see ``_lower_pattern``); ``appended`` says how this
         pattern extends it, where known."""
-        from cvxopt import cholmod, matrix, spmatrix
+        cholmod = import_cholmod()
+        from cvxopt import matrix, spmatrix
 
         self._cholmod, self._matrix, self._spmatrix = cholmod, matrix, spmatrix
         self.size = size
@@ -343,8 +345,7 @@ def available_backends() -> list[str]:
     """Backends that import here, fastest first."""
     names = []
     try:
-        import cvxopt.cholmod  # noqa: F401
-
+        import_cholmod()
         names.append("cholmod")
     except ImportError:
         pass
