@@ -173,8 +173,8 @@ class _Fronts:
             take = slice(None) if first == last else groups == group
             fronts = self.kept[group][1]
             size = fronts.shape[1]
-            rows = (self.slot[parent[take]] * size)[:, None] + within[take]
-            out[take] = fronts.take(rows[:, :, None] * size + within[take][:, None, :])
+            stacked = (self.slot[parent[take]] * size)[:, None] + within[take]  # rows of the stack
+            out[take] = fronts.take(stacked[:, :, None] * size + within[take][:, None, :])
 
 
 def selected_inverse(factor: SupernodalFactor, columns: np.ndarray) -> SelectedInverse:
