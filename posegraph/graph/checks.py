@@ -93,6 +93,20 @@ def element_problems(matrices: np.ndarray) -> tuple[np.ndarray, Callable[[int], 
     return bad, why
 
 
+def positive_definite(matrices: np.ndarray) -> np.ndarray:
+    """Whether each of (n, d, d) symmetric matrices is positive definite: every pivot of its
+    Gaussian elimination positive, all eliminated at once, column by column (numpy's batched
+    eigenvalues and Cholesky cost far more, or stop at the first failure)."""
+    reduced = np.array(matrices, dtype=float)
+    positive = np.ones(len(reduced), dtype=bool)
+    for k in range(reduced.shape[-1]):
+        pivot = reduced[:, k, k]
+        positive &= pivot > 0
+        factor = reduced[:, k + 1 :, k] / np.where(positive, pivot, 1.0)[:, None]
+        reduced[:, k + 1 :, k + 1 :] -= factor[:, :, None] * reduced[:, k, k + 1 :][:, None, :]
+    return positive
+
+
 def information_problems(information: np.ndarray) -> tuple[np.ndarray, Callable[[int], str]]:
     """Which of (n, d, d) information matrices are refused, and why the k-th is: not finite,
     not symmetric (|Ω − Ωᵀ| > 1e-9 max|Ω|), zero, or not positive semi-definite
@@ -103,7 +117,9 @@ def information_problems(information: np.ndarray) -> tuple[np.ndarray, Callable[
         asymmetry = np.abs(information - np.swapaxes(information, 1, 2)).max(axis=(1, 2))
     symmetric = np.isfinite(size) & (asymmetry <= 1e-9 * size)
     smallest = np.full(len(information), np.nan)  # fails every comparison where not symmetric
-    smallest[symmetric] = np.linalg.eigvalsh(information[symmetric])[:, 0]
+    smallest[symmetric] = np.inf  # λ_min > 0 where definite; the others' is computed
+    semi = np.flatnonzero(symmetric)[~positive_definite(information[symmetric])]
+    smallest[semi] = np.linalg.eigvalsh(information[semi])[:, 0]
     bad = ~(smallest >= -1e-9 * size) | (size == 0)
 
     def why(k: int) -> str:
@@ -153,8 +169,14 @@ def information_ranks(information: np.ndarray) -> np.ndarray:
     ``information_problems``."""
     if not len(information):
         return np.zeros(0, dtype=int)
-    eigenvalues = np.linalg.eigvalsh(information)
-    return np.count_nonzero(eigenvalues > 1e-9 * eigenvalues[:, -1:], axis=1)
+    count, d = information.shape[:2]
+    ranks = np.full(count, d)
+    # Definite beyond 1e-9 of its trace, a matrix has every eigenvalue above 1e-9 λ_max.
+    floor = 1e-9 * np.trace(information, axis1=1, axis2=2)[:, None, None] * np.eye(d)
+    rest = np.flatnonzero(~positive_definite(information - floor))
+    eigenvalues = np.linalg.eigvalsh(information[rest])
+    ranks[rest] = np.count_nonzero(eigenvalues > 1e-9 * eigenvalues[:, -1:], axis=1)
+    return ranks
 
 
 def measured_dof(information: np.ndarray) -> int:

@@ -1,7 +1,8 @@
 """What leaving an edge out, or adding one, does to a least-squares solution, to first order.
 
-Whiten each edge with Wₑ = Ωₑ^½: residual r̃ₑ = Wₑ rₑ and Jacobian rows Aₑ = Wₑ [∂r/∂δᵢ, ∂r/∂δⱼ].
-H = AᵀA is the information matrix of the linearised problem (priors included).
+Whiten each edge with a Wₑ such that Wₑᵀ Wₑ = Ωₑ: residual r̃ₑ = Wₑ rₑ and Jacobian rows
+Aₑ = Wₑ [∂r/∂δᵢ, ∂r/∂δⱼ]. H = AᵀA is the information matrix of the linearised problem (priors
+included).
 
 * An edge of the graph, with Mₑₑ = Aₑ H⁻¹ Aₑᵀ its block of the hat matrix: at the solution
   fitted without it, its whitened residual is (I − Mₑₑ)⁻¹ r̃ₑ, and its innovation against that
@@ -43,6 +44,7 @@ import functools
 import numpy as np
 
 from ..graph import EdgeSet, PoseGraph
+from ..graph.checks import positive_definite
 from ..lie import LieGroup
 from ..problem.cholesky import inverts_selectively
 from ..problem.covariance import joint_covariances
@@ -125,9 +127,20 @@ class _Factored:
 
 
 def _whitened(between: Linearization, information: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """r̃ₑ and the rows Aₑ = Ω^½ [Jᵢ Jⱼ] (m, d, 2d) of every between edge."""
-    root = information_root(information)
+    """r̃ₑ and the rows Aₑ = Wₑ [Jᵢ Jⱼ] (m, d, 2d) of every between edge (``_whitening``)."""
+    root = _whitening(information)
     return np.einsum("mab,mb->ma", root, between.residuals), root @ between.jacobians
+
+
+def _whitening(information: np.ndarray) -> np.ndarray:
+    """Wₑ with Wₑᵀ Wₑ = Ωₑ for each information matrix: Lᵀ of its Cholesky factor where it is
+    definite, its symmetric root elsewhere (``information_root``). Every quantity here is
+    the same for any such Wₑ: they change by an orthogonal Qₑ, r̃ₑ → Qₑ r̃ₑ, Aₑ → Qₑ Aₑ."""
+    definite = positive_definite(information)
+    roots = np.empty_like(information)
+    roots[definite] = np.swapaxes(np.linalg.cholesky(information[definite]), 1, 2)
+    roots[~definite] = information_root(information[~definite])
+    return roots
 
 
 def _rows_times(rows: np.ndarray, i: np.ndarray, j: np.ndarray, w: np.ndarray) -> np.ndarray:
@@ -158,22 +171,37 @@ def _factorize(
     else:
         factorize_information(system, data, regularize=True)
         between = solved.linearization.between
-    prior_rows = (
-        information_root(graph.priors.information) @ linearize_priors(values, graph.priors).jac_j
-    )
+    prior_rows = _whitening(graph.priors.information) @ linearize_priors(values, graph.priors).jac_j
     return _Factored(system, *_whitened(between, graph.edges.information), prior_rows)
 
 
-def _eigen(whitened: np.ndarray, matrices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Eigenvalues λ of the symmetrised Bₑ, clipped at ``SMALLEST_COMPLEMENT``, and r̃ₑ in
-    their eigenbasis: r̃ₑᵀ Bₑ⁻ᵏ r̃ₑ = Σ projected² / λᵏ. An edge whose residual or Bₑ
-    overflowed gets λ = 1 and projected = ∞, so that its r̃ₑᵀ Bₑ⁻ᵏ r̃ₑ is ∞."""
+def _quadratic_forms(
+    whitened: np.ndarray, matrices: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """r̃ₑᵀ Bₑ⁻¹ r̃ₑ, ‖Bₑ⁻¹ r̃ₑ‖² and the sum of Bₑ's eigenvalues above ``SMALLEST_COMPLEMENT``,
+    for the symmetrised Bₑ with its eigenvalues below ``SMALLEST_COMPLEMENT`` raised to it.
+    Where none is below (Bₑ − ``SMALLEST_COMPLEMENT`` I is positive definite), by a solve, the
+    sum being the trace; elsewhere from the eigenvalues. An edge whose residual or Bₑ overflowed
+    gets ∞, ∞ and d."""
+    count, d = whitened.shape
     finite = np.isfinite(whitened).all(axis=1) & np.isfinite(matrices).all(axis=(1, 2))
-    eigenvalues, projected = np.ones_like(whitened), np.full_like(whitened, np.inf)
-    symmetric = 0.5 * (matrices[finite] + np.swapaxes(matrices[finite], 1, 2))
-    eigenvalues[finite], eigenvectors = np.linalg.eigh(symmetric)
-    projected[finite] = np.einsum("mba,mb->ma", eigenvectors, whitened[finite])
-    return eigenvalues.clip(min=SMALLEST_COMPLEMENT), projected
+    symmetric = 0.5 * (matrices + np.swapaxes(matrices, 1, 2))
+    symmetric[~finite] = np.eye(d)
+    solved = finite & positive_definite(symmetric - SMALLEST_COMPLEMENT * np.eye(d))
+    inverse, squares = np.full(count, np.inf), np.full(count, np.inf)
+    eigenvalue_sum = np.full(count, float(d))
+    x = np.linalg.solve(symmetric[solved], whitened[solved][..., None])[..., 0]  # B⁻¹ r̃
+    inverse[solved] = np.einsum("ma,ma->m", whitened[solved], x)
+    squares[solved] = np.einsum("ma,ma->m", x, x)
+    eigenvalue_sum[solved] = np.trace(symmetric[solved], axis1=1, axis2=2)
+    rest = finite & ~solved
+    eigenvalues, eigenvectors = np.linalg.eigh(symmetric[rest])
+    projected = np.einsum("mba,mb->ma", eigenvectors, whitened[rest])
+    clipped = eigenvalues.clip(min=SMALLEST_COMPLEMENT)
+    inverse[rest] = (projected**2 / clipped).sum(axis=1)
+    squares[rest] = (projected**2 / clipped**2).sum(axis=1)
+    eigenvalue_sum[rest] = (clipped * (clipped > SMALLEST_COMPLEMENT)).sum(axis=1)
+    return inverse, squares, eigenvalue_sum
 
 
 @dataclasses.dataclass(frozen=True)
@@ -249,8 +277,7 @@ class Leverage:
         else:
             samples = _rows_times(rows, candidates.i, candidates.j, self._probed[2])  # (m, d, K)
             predicted = samples @ np.swapaxes(samples, 1, 2) / self.probes
-        eigenvalues, projected = _eigen(whitened, np.eye(d) + predicted)
-        return (projected**2 / eigenvalues).sum(axis=1)
+        return _quadratic_forms(whitened, np.eye(d) + predicted)[0]
 
     def sequential_innovations(self, candidates: EdgeSet) -> np.ndarray:
         """Exact innovation χ² of each edge of ``candidates`` against the solution with the
@@ -278,13 +305,8 @@ class Leverage:
 
 def _deleted(whitened: np.ndarray, hat: np.ndarray, exact: bool) -> DeletedResiduals:
     """Deleted residuals from r̃ₑ and the hat matrix's blocks Mₑₑ (``exact`` or estimated)."""
-    eigenvalues, projected = _eigen(whitened, np.eye(hat.shape[-1]) - hat)
-    return DeletedResiduals(
-        (projected**2 / eigenvalues).sum(axis=1),
-        (projected**2 / eigenvalues**2).sum(axis=1),
-        exact,
-        (eigenvalues * (eigenvalues > SMALLEST_COMPLEMENT)).sum(axis=1),
-    )
+    innovation, squares, redundancy = _quadratic_forms(whitened, np.eye(hat.shape[-1]) - hat)
+    return DeletedResiduals(innovation, squares, exact, redundancy)
 
 
 def deleted_residuals(
