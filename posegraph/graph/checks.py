@@ -95,15 +95,18 @@ def element_problems(matrices: np.ndarray) -> tuple[np.ndarray, Callable[[int], 
 
 def positive_definite(matrices: np.ndarray) -> np.ndarray:
     """Whether each of (n, d, d) symmetric matrices is positive definite: every pivot of its
-    Gaussian elimination positive, all eliminated at once, column by column (numpy's batched
-    eigenvalues and Cholesky cost far more, or stop at the first failure)."""
+    Gaussian elimination, scaled by its largest entry, positive and finite, all eliminated at
+    once, column by column (numpy's batched eigenvalues cost far more, and its Cholesky stops
+    at the first failure)."""
     reduced = np.array(matrices, dtype=float)
     positive = np.ones(len(reduced), dtype=bool)
-    for k in range(reduced.shape[-1]):
-        pivot = reduced[:, k, k]
-        positive &= pivot > 0
-        factor = reduced[:, k + 1 :, k] / np.where(positive, pivot, 1.0)[:, None]
-        reduced[:, k + 1 :, k + 1 :] -= factor[:, :, None] * reduced[:, k, k + 1 :][:, None, :]
+    with np.errstate(all="ignore"):  # a pivot that overflows or is NaN fails the test
+        reduced /= np.abs(reduced).max(axis=(1, 2), keepdims=True)  # definiteness is scale-free
+        for k in range(reduced.shape[-1]):
+            pivot = reduced[:, k, k]
+            positive &= (pivot > 0) & (pivot < np.inf)
+            factor = reduced[:, k + 1 :, k] / np.where(positive, pivot, 1.0)[:, None]
+            reduced[:, k + 1 :, k + 1 :] -= factor[:, :, None] * reduced[:, k, k + 1 :][:, None, :]
     return positive
 
 
