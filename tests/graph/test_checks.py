@@ -47,3 +47,10 @@ def test_ranks_and_refusals_are_those_of_the_eigenvalues(d):
     negative = int(np.flatnonzero(eigenvalues[:, 0] < -0.05)[0])
     assert why(negative) == f"not positive semi-definite (λ_min = {eigenvalues[negative, 0]:.3g})"
     assert why(len(matrices) - 1) == "zero (it would weigh nothing)"
+
+
+@pytest.mark.filterwarnings("error")
+def test_definiteness_holds_at_any_scale_without_warnings():
+    overflowing = np.array([[1e-300, 1e300, 0.0], [1e300, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    matrices = np.array([np.eye(3) * 1e300, overflowing, np.eye(3) * 1e-300, np.zeros((3, 3))])
+    np.testing.assert_array_equal(positive_definite(matrices), [True, False, True, False])
