@@ -134,9 +134,11 @@ def _whitened(between: Linearization, information: np.ndarray) -> tuple[np.ndarr
 
 def _whitening(information: np.ndarray) -> np.ndarray:
     """Wₑ with Wₑᵀ Wₑ = Ωₑ for each information matrix: Lᵀ of its Cholesky factor where it is
-    definite, its symmetric root elsewhere (``information_root``). Every quantity here is
+    definite beyond 1e-12 of its trace, its symmetric root elsewhere (``information_root``). Every quantity here is
     the same for any such Wₑ: they change by an orthogonal Qₑ, r̃ₑ → Qₑ r̃ₑ, Aₑ → Qₑ Aₑ."""
-    definite = positive_definite(information)
+    d = information.shape[-1]
+    margin = 1e-12 * np.trace(information, axis1=1, axis2=2)[:, None, None] * np.eye(d)
+    definite = positive_definite(information - margin)  # clear of rounding: Cholesky succeeds
     roots = np.empty_like(information)
     roots[definite] = np.swapaxes(np.linalg.cholesky(information[definite]), 1, 2)
     roots[~definite] = information_root(information[~definite])

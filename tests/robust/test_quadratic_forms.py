@@ -1,12 +1,13 @@
 """The deleted residuals' and innovations' quadratic forms, by a solve where Bₑ is well
-conditioned and from its eigenvalues elsewhere, against the clipped eigendecomposition."""
+conditioned and from its eigenvalues elsewhere, against the clipped eigendecomposition; and the
+whitening of edges, by Cholesky where their information is definite."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from posegraph.robust.leverage import SMALLEST_COMPLEMENT, _quadratic_forms
+from posegraph.robust.leverage import SMALLEST_COMPLEMENT, _quadratic_forms, _whitening
 
 
 def _matrices(count: int, d: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -54,3 +55,18 @@ def test_an_overflowed_edge_gets_infinite_forms_and_full_redundancy():
     assert np.isinf(inverse[[1, 4]]).all() and np.isinf(squares[[1, 4]]).all()
     assert np.all(redundancy[[1, 4]] == 6)
     assert np.isfinite(inverse[[0, 2, 3, 5]]).all()
+
+
+def test_whitening_squares_to_the_information_definite_or_not():
+    """Wᵀ W = Ω for definite information, nearly singular information (an eigenvalue 1e-17 of
+    the others, where a Cholesky may fail), and a position-only one, in one batch."""
+    matrices, _ = _matrices(30, 6, seed=5)
+    information = np.concatenate(
+        [
+            0.5 * (matrices[1::3] + np.swapaxes(matrices[1::3], 1, 2)) + 3 * np.eye(6),
+            np.diag([1.0, 2.0, 3.0, 4.0, 5.0, 1e-17])[None],
+            np.diag([1.0, 1.0, 1.0, 0.0, 0.0, 0.0])[None],
+        ]
+    )
+    roots = _whitening(information)
+    np.testing.assert_allclose(np.swapaxes(roots, 1, 2) @ roots, information, atol=1e-12)
