@@ -94,14 +94,19 @@ def element_problems(matrices: np.ndarray) -> tuple[np.ndarray, Callable[[int], 
 
 
 def positive_definite(matrices: np.ndarray) -> np.ndarray:
-    """Whether each of (n, d, d) symmetric matrices is positive definite: every pivot of its
-    Gaussian elimination, scaled by its largest entry, positive and finite, all eliminated at
-    once, column by column (numpy's batched eigenvalues cost far more, and its Cholesky stops
-    at the first failure)."""
-    reduced = np.array(matrices, dtype=float)
-    positive = np.ones(len(reduced), dtype=bool)
+    """Whether each of (n, d, d) symmetric matrices is positive definite. numpy's batched
+    Cholesky answers for all at once where every one is, the usual case; otherwise a Gaussian
+    elimination of all at once, column by column, tells which: every pivot (of the matrix
+    scaled by its largest entry) positive and finite. Batched eigenvalues cost far more."""
     with np.errstate(all="ignore"):  # a pivot that overflows or is NaN fails the test
+        reduced = np.array(matrices, dtype=float)
         reduced /= np.abs(reduced).max(axis=(1, 2), keepdims=True)  # definiteness is scale-free
+        try:
+            if np.isfinite(np.linalg.cholesky(reduced)).all():
+                return np.ones(len(reduced), dtype=bool)
+        except np.linalg.LinAlgError:
+            pass
+        positive = np.ones(len(reduced), dtype=bool)
         for k in range(reduced.shape[-1]):
             pivot = reduced[:, k, k]
             positive &= (pivot > 0) & (pivot < np.inf)
