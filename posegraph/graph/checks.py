@@ -115,6 +115,13 @@ def positive_definite(matrices: np.ndarray) -> np.ndarray:
     return positive
 
 
+def definite_beyond(matrices: np.ndarray, share: float) -> np.ndarray:
+    """Whether each of (n, d, d) symmetric matrices stays positive definite less ``share`` of
+    its trace on its diagonal: then every eigenvalue exceeds ``share`` λ_max (λ_max ≤ trace)."""
+    trace = np.trace(matrices, axis1=1, axis2=2)
+    return positive_definite(matrices - share * trace[:, None, None] * np.eye(matrices.shape[-1]))
+
+
 def information_problems(information: np.ndarray) -> tuple[np.ndarray, Callable[[int], str]]:
     """Which of (n, d, d) information matrices are refused, and why the k-th is: not finite,
     not symmetric (|Ω − Ωᵀ| > 1e-9 max|Ω|), zero, or not positive semi-definite
@@ -179,9 +186,7 @@ def information_ranks(information: np.ndarray) -> np.ndarray:
         return np.zeros(0, dtype=int)
     count, d = information.shape[:2]
     ranks = np.full(count, d)
-    # Definite beyond 1e-9 of its trace, a matrix has every eigenvalue above 1e-9 λ_max.
-    floor = 1e-9 * np.trace(information, axis1=1, axis2=2)[:, None, None] * np.eye(d)
-    rest = np.flatnonzero(~positive_definite(information - floor))
+    rest = np.flatnonzero(~definite_beyond(information, 1e-9))  # the others have rank d
     eigenvalues = np.linalg.eigvalsh(information[rest])
     ranks[rest] = np.count_nonzero(eigenvalues > 1e-9 * eigenvalues[:, -1:], axis=1)
     return ranks

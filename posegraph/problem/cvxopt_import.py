@@ -10,6 +10,7 @@ for this import only: the variable is removed again, so child processes choose f
 
 from __future__ import annotations
 
+import functools
 import os
 
 CORE_TYPES = (("AVX512_SKX", "SkylakeX"), ("AVX2", "Haswell"))
@@ -37,8 +38,10 @@ def core_type(features: dict[str, bool]) -> str | None:
     return next((core for name, core in CORE_TYPES if features.get(name)), None)
 
 
+@functools.cache
 def import_cholmod():
-    """``cvxopt.cholmod``; ``ImportError`` if cvxopt is not installed."""
+    """``cvxopt.cholmod``, the environment set once; ``ImportError`` if cvxopt is not
+    installed."""
     chosen = None if "OPENBLAS_CORETYPE" in os.environ else core_type(_cpu_features())
     if chosen is not None:
         os.environ["OPENBLAS_CORETYPE"] = chosen

@@ -44,7 +44,7 @@ import functools
 import numpy as np
 
 from ..graph import EdgeSet, PoseGraph
-from ..graph.checks import positive_definite
+from ..graph.checks import definite_beyond, positive_definite
 from ..lie import LieGroup
 from ..problem.cholesky import inverts_selectively
 from ..problem.covariance import joint_covariances
@@ -134,11 +134,10 @@ def _whitened(between: Linearization, information: np.ndarray) -> tuple[np.ndarr
 
 def _whitening(information: np.ndarray) -> np.ndarray:
     """Wₑ with Wₑᵀ Wₑ = Ωₑ for each information matrix: Lᵀ of its Cholesky factor where it is
-    definite beyond 1e-12 of its trace, its symmetric root elsewhere (``information_root``). Every quantity here is
-    the same for any such Wₑ: they change by an orthogonal Qₑ, r̃ₑ → Qₑ r̃ₑ, Aₑ → Qₑ Aₑ."""
-    d = information.shape[-1]
-    margin = 1e-12 * np.trace(information, axis1=1, axis2=2)[:, None, None] * np.eye(d)
-    definite = positive_definite(information - margin)  # clear of rounding: Cholesky succeeds
+    definite beyond 1e-12 of its trace (clear of rounding, so that LAPACK's Cholesky succeeds),
+    its symmetric root elsewhere (``information_root``). Every quantity here is the same for
+    any such Wₑ: they change by an orthogonal Qₑ, r̃ₑ → Qₑ r̃ₑ, Aₑ → Qₑ Aₑ."""
+    definite = definite_beyond(information, 1e-12)
     roots = np.empty_like(information)
     roots[definite] = np.swapaxes(np.linalg.cholesky(information[definite]), 1, 2)
     roots[~definite] = information_root(information[~definite])
