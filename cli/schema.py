@@ -80,7 +80,7 @@ SUMMARY = {
     ],
     "properties": {
         "method": {"enum": ["lm", "gn"]},
-        "linear_solver": {"enum": ["cholmod", "scipy"]},
+        "linear_solver": {"enum": ["cholmod", "scipy", "cg"]},
         "initial_error": _NUMBER,
         "final_error": _NUMBER,
         "initial_chi2": _NUMBER,

@@ -19,7 +19,8 @@ import numpy as np
 
 from ..graph import PoseGraph
 from ..lie import SE2, SE3
-from ..problem.cholesky import NotPositiveDefinite, make_cholesky
+from ..problem.backends import make_cholesky
+from ..problem.cholesky import NotPositiveDefinite
 
 if TYPE_CHECKING:
     import scipy.sparse

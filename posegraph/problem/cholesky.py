@@ -6,7 +6,7 @@
 * ``scipy``: SuperLU in symmetric mode with a minimum-degree ordering computed once and reused
   (``permc_spec="NATURAL"`` on the pre-permuted matrix). Pure scipy, always available.
 
-``make_cholesky(..., backend="auto")`` picks CHOLMOD when cvxopt imports, else scipy.
+``posegraph.problem.backends`` chooses among them (and conjugate gradients, ``iterative``).
 A matrix that is not positive definite raises ``NotPositiveDefinite``. Both give each column's
 pivot (``pivots``): dⱼ of P A Pᵀ = L D Lᵀ (L unit lower triangular), the Schur complement's
 diagonal entry where column j is eliminated. dⱼ/Aⱼⱼ near zero marks a column that the columns
@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .cvxopt_import import import_cholmod
+from .factor_size import predicted_flops
 from .selected_inversion import SupernodalFactor, inverse_blocks
 
 if TYPE_CHECKING:
@@ -198,6 +199,11 @@ class CholmodCholesky:
         self._cholmod.solve(self._factor, b)
         return np.array(b).reshape(np.shape(rhs))
 
+    def predicted_flops(self) -> float | None:
+        """About the flops of a numeric factorisation, from the symbolic analysis
+        (``factor_size``); None where it cannot be read."""
+        return predicted_flops(self._factor or self._analyse(), self.size)
+
     def covariance_blocks(self, groups: np.ndarray) -> np.ndarray:
         """Blocks (A⁻¹)[g, g], (G, c, c), for G groups g of c columns (G, c): by sparse solves
         (their cost grows with each column), or, as ``covariance_by_solves`` decides and if this
@@ -336,57 +342,3 @@ class ScipyCholesky:
             block[:] = self.solve(unit)[group]
             unit[group, np.arange(group.size)] = 0.0
         return blocks
-
-
-BACKENDS = {"cholmod": CholmodCholesky, "scipy": ScipyCholesky}
-
-
-def available_backends() -> list[str]:
-    """Backends that import here, fastest first."""
-    names = []
-    try:
-        import_cholmod()
-        names.append("cholmod")
-    except ImportError:
-        pass
-    names.append("scipy")
-    return names
-
-
-def resolve_backend(backend: str) -> str:
-    """The backend that ``backend`` names, "auto" being the fastest available; ``ValueError``
-    if it is unknown or not available here."""
-    if backend == "auto":
-        return available_backends()[0]
-    if backend not in BACKENDS:
-        choices = ", ".join(BACKENDS)
-        raise ValueError(f"unknown sparse Cholesky backend {backend!r}; choose from {choices}")
-    if backend not in available_backends():
-        raise ValueError(f"backend {backend!r} is not available here (is cvxopt installed?)")
-    return backend
-
-
-def inverts_selectively(backend: str) -> bool:
-    """Whether ``backend``'s covariance blocks of many groups come from selected inversion, at
-    about the cost of a factorisation, rather than from a solve per group."""
-    return BACKENDS[resolve_backend(backend)].inverts_selectively
-
-
-def make_cholesky(
-    indices: np.ndarray,
-    indptr: np.ndarray,
-    size: int,
-    backend: str = "auto",
-    for_covariance: bool = False,
-    previous=None,
-    appended: Appended | None = None,
-):
-    """A factoriser for the symmetric CSC pattern (both triangles stored, sorted indices);
-    ``for_covariance`` prepares it for ``covariance_blocks``. ``previous``, a factoriser of
-    the same backend for a pattern this one grew from (as ``appended`` says, where known),
-    may speed up the set-up."""
-    backend = resolve_backend(backend)
-    if backend == "cholmod":
-        grown_from = previous if isinstance(previous, CholmodCholesky) else None
-        return CholmodCholesky(indices, indptr, size, for_covariance, grown_from, appended)
-    return ScipyCholesky(indices, indptr, size)

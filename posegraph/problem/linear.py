@@ -14,7 +14,8 @@ import copy
 import numpy as np
 
 from ..graph import PoseGraph
-from .cholesky import NotPositiveDefinite, make_cholesky
+from .backends import make_cholesky
+from .cholesky import NotPositiveDefinite
 from .factors import Linearization
 from .pattern import BlockLayout, free_block_index
 

@@ -46,7 +46,7 @@ import numpy as np
 from ..graph import EdgeSet, PoseGraph
 from ..graph.checks import definite_beyond, positive_definite
 from ..lie import LieGroup
-from ..problem.cholesky import inverts_selectively
+from ..problem.backends import inverts_selectively
 from ..problem.covariance import joint_covariances
 from ..problem.factors import Linearization, information_root, linearize_between, linearize_priors
 from ..problem.information import factorize_information, factorized_information

@@ -11,7 +11,7 @@ import numpy as np
 from ..graph import PoseGraph, connected_components, information_ranks, measured_dof
 from ..init.choice import choose, initialize
 from ..init.spanning_tree import align_to_priors, spanning_tree_values
-from ..problem.cholesky import resolve_backend
+from ..problem.backends import resolve_backend
 from ..problem.factors import between_squares, chi2, linearize_between
 from ..robust.kernels import default_width
 from ..robust.spec import Kernel

@@ -40,7 +40,7 @@ class SolverOptions:
         initial_damping: λ at the start, relative to max diag(H) for "identity" damping. None:
             ``DEFAULT_INITIAL_DAMPING``, and in GNC's solves ``gnc.INITIAL_DAMPING``.
         min_diagonal, max_diagonal: clamp diag(H) before using it as damping (as Ceres does).
-        linear_solver: "auto", "cholmod" or "scipy" (see ``posegraph.problem.cholesky``).
+        linear_solver: "auto", "cholmod", "scipy" or "cg" (see ``posegraph.problem.backends``).
     """
 
     method: str = "lm"

@@ -16,6 +16,7 @@ from posegraph.graph import PoseGraph
 from posegraph.lie import SE2, SE3, SO3, Sim3
 from posegraph.lie.uncertainty import compose_covariance, inverse_covariance
 from posegraph.problem import cholesky as sparse_cholesky
+from posegraph.problem.backends import available_backends
 from posegraph.problem.cholesky import COUPLED_COLUMNS, SOLVED_COLUMNS, NotPositiveDefinite
 from posegraph.problem.factors import linearize_between, linearize_priors
 from posegraph.problem.linear import NormalEquations
@@ -125,7 +126,7 @@ def test_the_covariance_at_the_solution_factorises_h_of_the_solves_linearisation
     np.testing.assert_allclose(covariance, posegraph.marginals(copied, nodes), rtol=1e-10)
 
 
-@pytest.mark.skipif("cholmod" not in sparse_cholesky.available_backends(), reason="no cvxopt")
+@pytest.mark.skipif("cholmod" not in available_backends(), reason="no cvxopt")
 def test_covariances_from_a_simplicial_ldlt_factor(monkeypatch):
     """With CHOLMOD set to simplicial factors (P A Pᵀ = L D Lᵀ), the solve's normal equations
     still give the covariance: D enters the solves."""
@@ -141,7 +142,7 @@ def test_covariances_from_a_simplicial_ldlt_factor(monkeypatch):
     np.testing.assert_allclose(reused, posegraph.marginals(graph.copy(), nodes), rtol=1e-10)
 
 
-@pytest.mark.parametrize("backend", sparse_cholesky.available_backends())
+@pytest.mark.parametrize("backend", available_backends())
 def test_covariances_are_symmetric_to_the_last_bit(backend):
     """Solves leave rounding asymmetry (SuperLU's did, by up to 1e-7 relative on graphs of
     information singular to rounding); a covariance handed out is symmetric exactly."""
@@ -154,7 +155,7 @@ def test_covariances_are_symmetric_to_the_last_bit(backend):
     np.testing.assert_array_equal(joint, joint.T)
 
 
-@pytest.mark.parametrize("backend", sparse_cholesky.available_backends())
+@pytest.mark.parametrize("backend", available_backends())
 def test_covariances_of_information_singular_to_working_precision_are_refused(backend):
     """A prior whose information has eigenvalues 1, 2 and 1e-14 (in turned axes): H factorises,
     its least pivot at rounding's scale, and its inverse would keep two digits. It is refused

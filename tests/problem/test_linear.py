@@ -8,13 +8,8 @@ import scipy.sparse
 import scipy.sparse.linalg
 from posegraph_datasets.generators import docked, sphere
 
-from posegraph.problem.cholesky import (
-    NotPositiveDefinite,
-    available_backends,
-    builds_transposed,
-    make_cholesky,
-    ones_at,
-)
+from posegraph.problem.backends import available_backends, make_cholesky
+from posegraph.problem.cholesky import NotPositiveDefinite, builds_transposed, ones_at
 from posegraph.problem.factors import linearize_between, linearize_priors
 from posegraph.problem.linear import NormalEquations
 

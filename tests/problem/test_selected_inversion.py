@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import scipy.sparse
 
-from posegraph.problem.cholesky import available_backends, make_cholesky
+from posegraph.problem.backends import available_backends, make_cholesky
 from posegraph.problem.selected_inversion import (
     TRIANGULAR_LEAF,
     SupernodalFactor,

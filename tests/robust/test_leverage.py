@@ -11,7 +11,7 @@ from posegraph_datasets.monocular import monocular_sequence
 
 from posegraph.graph import odometry_mask
 from posegraph.lie import SE3
-from posegraph.problem.cholesky import available_backends, inverts_selectively
+from posegraph.problem.backends import available_backends, inverts_selectively
 from posegraph.problem.factors import between_squares
 from posegraph.robust import leverage as leverage_module
 from posegraph.robust.leverage import Leverage, deleted_residuals, innovations

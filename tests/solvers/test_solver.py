@@ -11,7 +11,7 @@ from posegraph_datasets.outliers import add_false_loops
 import posegraph
 from posegraph.io import read_graph
 from posegraph.lie import SE2, SE3
-from posegraph.problem.cholesky import available_backends
+from posegraph.problem.backends import available_backends
 from posegraph.problem.factors import linearize_between, linearize_priors
 from posegraph.problem.linear import NormalEquations
 from posegraph.robust.spec import robust_mask
