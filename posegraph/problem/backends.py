@@ -74,8 +74,16 @@ def make_cholesky(
     return cholmod
 
 
+def predicted_flops_per_entry(cholmod: CholmodCholesky, entries: int) -> float | None:
+    """CHOLMOD's predicted factorisation flops (``CholmodCholesky.predicted_flops``) per stored
+    entry of the lower triangle, about half of ``entries`` (both triangles' count); None where
+    they cannot be read."""
+    flops = cholmod.predicted_flops()
+    return None if flops is None else flops / (0.5 * entries)
+
+
 def _fills(cholmod: CholmodCholesky, entries: int) -> bool:
     """Whether CHOLMOD's factorisation would take more than ``FLOPS_PER_ENTRY`` flops per stored
-    entry of the lower triangle (about half of ``entries``, both triangles' count)."""
-    flops = cholmod.predicted_flops()
-    return flops is not None and flops > FLOPS_PER_ENTRY * 0.5 * entries
+    entry (``predicted_flops_per_entry``)."""
+    per_entry = predicted_flops_per_entry(cholmod, entries)
+    return per_entry is not None and per_entry > FLOPS_PER_ENTRY

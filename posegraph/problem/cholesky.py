@@ -202,7 +202,9 @@ class CholmodCholesky:
     def predicted_flops(self) -> float | None:
         """About the flops of a numeric factorisation, from the symbolic analysis
         (``factor_size``); None where it cannot be read."""
-        return predicted_flops(self._factor or self._analyse(), self.size)
+        if self._factor is None:
+            self._factor = self._analyse()
+        return predicted_flops(self._factor, self.size)
 
     def covariance_blocks(self, groups: np.ndarray) -> np.ndarray:
         """Blocks (A⁻¹)[g, g], (G, c, c), for G groups g of c columns (G, c): by sparse solves
