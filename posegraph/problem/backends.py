@@ -84,6 +84,8 @@ def predicted_flops_per_entry(cholmod: CholmodCholesky, entries: int) -> float |
 
 def _fills(cholmod: CholmodCholesky, entries: int) -> bool:
     """Whether CHOLMOD's factorisation would take more than ``FLOPS_PER_ENTRY`` flops per stored
-    entry (``predicted_flops_per_entry``)."""
+    entry (``predicted_flops_per_entry``); not read where even a dense factor's n³/3 would not."""
+    if cholmod.size**3 / 3.0 <= FLOPS_PER_ENTRY * 0.5 * entries:
+        return False
     per_entry = predicted_flops_per_entry(cholmod, entries)
     return per_entry is not None and per_entry > FLOPS_PER_ENTRY
