@@ -55,18 +55,17 @@ class ConjugateGradients:
         self._data, self._factorised = data, False
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
-        """Solve for a vector (n,) or for every column of (n, k)."""
-        if self._factorised:
-            return self._direct.solve(rhs)
+        """Solve for a vector (n,) or (n, 1) by conjugate gradients; for (n, k) columns, k > 1
+        (leverage's probes), by the direct factoriser, whose factorisation costs a few
+        conjugate-gradient solves where this backend is chosen, and each column after it two
+        triangular solves."""
         rhs = np.asarray(rhs, dtype=float)
-        columns = rhs.reshape(self.size, -1)
-        solutions = np.empty_like(columns)
-        for k in range(columns.shape[1]):
-            solution = self._iterate(columns[:, k])
-            if solution is None:
-                return self._factor().solve(rhs)
-            solutions[:, k] = solution
-        return solutions.reshape(rhs.shape)
+        if self._factorised or rhs.size > self.size:
+            return self._factor().solve(rhs)
+        solution = self._iterate(rhs.ravel())
+        if solution is None:
+            return self._factor().solve(rhs)
+        return solution.reshape(rhs.shape)
 
     def _iterate(self, b: np.ndarray) -> np.ndarray | None:
         """The preconditioned conjugate-gradient solution of A x = b, or None where it does not

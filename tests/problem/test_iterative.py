@@ -79,14 +79,24 @@ def test_conjugate_gradients_solve_as_the_direct_factorisation_does(group):
     system, data, gradient = _normal_matrix(random_graph(group, 80, 40, seed=5))
     direct = make_cholesky(system.indices, system.indptr, system.size, "scipy")
     direct.factorize(data)
-    iterative_solver = ConjugateGradients(
-        system.indices, system.indptr, system.size, lambda: pytest.fail("fell back")
-    )
+    made = []
+
+    def fallback():
+        made.append(make_cholesky(system.indices, system.indptr, system.size, "scipy"))
+        return made[-1]
+
+    iterative_solver = ConjugateGradients(system.indices, system.indptr, system.size, fallback)
     iterative_solver.factorize(data)
     expected = direct.solve(-gradient)
     np.testing.assert_allclose(iterative_solver.solve(-gradient), expected, rtol=1e-7, atol=1e-9)
-    two = np.stack([-gradient, gradient + 1.0], axis=1)
-    np.testing.assert_allclose(iterative_solver.solve(two), direct.solve(two), rtol=1e-7, atol=1e-9)
+    column = -gradient[:, None]
+    np.testing.assert_allclose(
+        iterative_solver.solve(column), direct.solve(column), rtol=1e-7, atol=1e-9
+    )
+    assert not made  # conjugate gradients alone
+    two = np.stack([-gradient, gradient + 1.0], axis=1)  # several columns: the factor serves
+    np.testing.assert_allclose(iterative_solver.solve(two), direct.solve(two), rtol=1e-9)
+    assert len(made) == 1
 
 
 def test_a_matrix_that_is_not_positive_definite_falls_back_and_is_refused():
