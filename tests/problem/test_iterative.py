@@ -34,6 +34,18 @@ def _normal_matrix(graph):
     return system, system.normal_matrix(*terms), system.gradient(*terms)
 
 
+def _with_recorded_fallback(system):
+    """Conjugate gradients over ``system``'s pattern, and the list of the SuperLU factorisers
+    they fall back to (made on first need)."""
+    made = []
+
+    def fallback():
+        made.append(make_cholesky(system.indices, system.indptr, system.size, "scipy"))
+        return made[-1]
+
+    return ConjugateGradients(system.indices, system.indptr, system.size, fallback), made
+
+
 @needs_cholmod
 @pytest.mark.parametrize(("group", "nodes", "loops"), [(SE2, 60, 20), (SE3, 200, 300)])
 def test_predicted_column_counts_are_those_of_the_computed_factor(group, nodes, loops):
@@ -79,13 +91,7 @@ def test_conjugate_gradients_solve_as_the_direct_factorisation_does(group):
     system, data, gradient = _normal_matrix(random_graph(group, 80, 40, seed=5))
     direct = make_cholesky(system.indices, system.indptr, system.size, "scipy")
     direct.factorize(data)
-    made = []
-
-    def fallback():
-        made.append(make_cholesky(system.indices, system.indptr, system.size, "scipy"))
-        return made[-1]
-
-    iterative_solver = ConjugateGradients(system.indices, system.indptr, system.size, fallback)
+    iterative_solver, made = _with_recorded_fallback(system)
     iterative_solver.factorize(data)
     expected = direct.solve(-gradient)
     np.testing.assert_allclose(iterative_solver.solve(-gradient), expected, rtol=1e-7, atol=1e-9)
@@ -104,13 +110,7 @@ def test_a_matrix_that_is_not_positive_definite_falls_back_and_is_refused():
     indefinite = data.copy()
     diagonal = system.indices == np.repeat(np.arange(system.size), np.diff(system.indptr))
     indefinite[np.flatnonzero(diagonal)[4]] = -1.0
-    made = []
-
-    def direct():
-        made.append(make_cholesky(system.indices, system.indptr, system.size, "scipy"))
-        return made[-1]
-
-    solver = ConjugateGradients(system.indices, system.indptr, system.size, direct)
+    solver, made = _with_recorded_fallback(system)
     solver.factorize(indefinite)
     with pytest.raises(NotPositiveDefinite):
         solver.solve(-gradient)
