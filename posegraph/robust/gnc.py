@@ -7,10 +7,8 @@ consistency pass and a local search.
 2. Repeat: weigh the edges by the TLS-GNC weights of their current residuals, solve the weighted
    problem, raise μ by 1.4; until the weights are binary. Edges of weight 0 are left out of the
    linear system (the random fill-in of false loops would dominate the cost).
-   Yang et al. solve every stage globally. Here a stage is solved twice over: warm-started from
-   the previous stage (at the λ where its Levenberg-Marquardt left off), and (SE2, SE3, Sim3)
-   from the chordal relaxation of the weighted problem; the run that ends with the lower TLS
-   objective Σ min(s, c²) is kept.
+   Yang et al. solve every stage globally. Here a stage starts from the chordal relaxation of
+   the weighted problem, which does not depend on where the last stage stopped.
 3. Consistency: from the chordal relaxation of the kept (outlier-free) edges, solve least
    squares as ``optimize`` would (a fresh start, with the caller's options), keep every edge
    with s ≤ c² at the solution, and repeat until the kept set no longer changes. This re-admits
@@ -59,7 +57,7 @@ from ..solvers import (
 )
 from .kernels import tls_gnc_weights
 from .local_search import local_search
-from .tls import INITIAL_DAMPING, Run, Stopped, settle_best, starts, tls_objective
+from .tls import INITIAL_DAMPING, Run, Stopped, settle_best, tls_objective
 
 MU_FACTOR = 1.4
 MAX_ROUNDS = 200
@@ -68,8 +66,8 @@ DECISION_SOLVES = 2
 the new measurements kept, then once more without what misfits there (``_settle_decisions``);
 settling them fully costs as much as GNC's stages where every step brings a false loop."""
 STAGE_ITERATIONS = 5
-"""Most Levenberg-Marquardt iterations of a graduated stage's solve: the next stage, a little
-less convex, goes on from where it stops."""
+"""Most Levenberg-Marquardt iterations of a graduated stage's solve from its chordal
+relaxation: the next stage, a little less convex, weighs the edges where it stops."""
 STAGE_RELATIVE_DECREASE = 1e-5
 START_ITERATIONS = 20
 """Most Levenberg-Marquardt iterations of least squares over every edge, GNC's start: with
@@ -92,8 +90,9 @@ class GncOutcome:
     (``_settle_decisions``), instead of at GNC's stages."""
 
 
-def _stages(graph, mask, width_sq, options, start: Result, restart: bool, run: Run):
-    """GNC rounds from the least-squares solution ``start``; returns (result, weights)."""
+def _stages(graph, mask, width_sq, options, start: Result, run: Run):
+    """GNC rounds from the least-squares solution ``start``, each solved from the chordal
+    relaxation of its weighted problem; returns (result, weights)."""
     stage_options = dataclasses.replace(
         options,
         max_iterations=min(options.max_iterations, STAGE_ITERATIONS),
@@ -116,27 +115,14 @@ def _stages(graph, mask, width_sq, options, start: Result, restart: bool, run: R
         if active is None or not np.array_equal(now_active, active):
             active = now_active
             system = NormalEquations(work, work.gauge_nodes(), options.linear_solver)
-        work.set_values(initialize(work, "chordal") if restart else result.values, check=False)
-        label = f"gnc round {rounds} ({'chordal' if restart else 'warm'})"
+        work.set_values(initialize(work, "chordal"), check=False)
+        label = f"gnc round {rounds} (chordal)"
         result = run.solve(work, stage_options, label, system=system)
-        if not restart:
-            stage_options = _continued(stage_options, result)
         s = between_squares(result.values, graph.edges)
         if rounds > 1 and np.all((weights[mask] < 1e-6) | (weights[mask] > 1.0 - 1e-6)):
             break
         mu *= MU_FACTOR
     return result, weights
-
-
-def _continued(options: SolverOptions, result: Result) -> SolverOptions:
-    """``options`` whose Levenberg-Marquardt starts at the λ where ``result``'s solve left it:
-    a warm stage goes on from the last one's solution, where a λ small enough for its start
-    proposes steps that the less convex surrogate rejects, more than a stage's few iterations
-    can raise it past. Other methods' options stand."""
-    records = result.summary.iterations
-    if options.method != "lm" or not records:
-        return options
-    return dataclasses.replace(options, initial_damping=max(records[-1].damping, INITIAL_DAMPING))
 
 
 def gnc_tls(
@@ -232,13 +218,7 @@ def _graduated(graph, mask, width_sq, options, run: Run) -> tuple[np.ndarray, Re
         relative_decrease=STAGE_RELATIVE_DECREASE,
     )
     start = run.solve(graph, least_squares, "least squares")
-    best, best_objective = None, np.inf
-    for restart in starts(graph):
-        result, weights = _stages(graph, mask, width_sq, options, start, restart, run)
-        objective = tls_objective(graph, result.values, mask, width_sq)
-        if best is None or objective < best_objective:  # the first, even if not finite
-            best, best_objective = (result, weights), objective
-    result, weights = best
+    result, weights = _stages(graph, mask, width_sq, options, start, run)
     return settle_best(graph, mask, ~mask | (weights > 0.5), result.values, width_sq, options, run)
 
 

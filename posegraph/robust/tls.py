@@ -10,7 +10,6 @@ import numpy as np
 
 from ..graph import PoseGraph
 from ..init.choice import initialize
-from ..init.chordal import supports as supports_chordal
 from ..lie import LieGroup
 from ..problem.factors import between_squares, prior_squares
 from ..solvers import (
@@ -104,23 +103,17 @@ def tls_objective(
     return float(truncated + prior_squares(values, graph.priors).sum())
 
 
-def starts(graph: PoseGraph) -> tuple[bool, ...]:
-    """The starts a GNC step is solved from: warm (False), and from the chordal relaxation
-    (True) where the group has one."""
-    return (False, True) if supports_chordal(graph.group) else (False,)
-
-
 def settle(graph, mask, kept, values, width_sq, options, run: Run, restart: bool):
     """Least squares over the kept edges, then keep every edge with s ≤ c² at the solution;
-    repeat until the kept set no longer changes. Returns (kept, result). With ``restart``
-    (SE2, SE3, Sim3) the first solve starts from the chordal relaxation of the kept edges, which
-    escapes a basin that an early, outlier-distorted GNC stage may have led into. That solve is
-    a fresh start, made with the caller's options (``run.options``): least squares' initial λ
-    unless they set one, not ``INITIAL_DAMPING``."""
+    repeat until the kept set no longer changes. Returns (kept, result). With ``restart`` the
+    first solve starts from the chordal relaxation of the kept edges, which escapes a basin
+    that an early, outlier-distorted GNC stage may have led into. That solve is a fresh start,
+    made with the caller's options (``run.options``): least squares' initial λ unless they set
+    one, not ``INITIAL_DAMPING``."""
     result = None
     for settle_pass in range(MAX_CONSISTENCY_PASSES):
         work = graph.with_edges(kept)
-        if settle_pass == 0 and restart and supports_chordal(graph.group):
+        if settle_pass == 0 and restart:
             work.set_values(initialize(work, "chordal"), check=False)
             result = run.solve(work, run.options, "consistency (chordal)")
         else:
@@ -135,14 +128,13 @@ def settle(graph, mask, kept, values, width_sq, options, run: Run, restart: bool
 
 
 def settle_best(graph, mask, kept, values, width_sq, options, run: Run):
-    """``settle`` from ``values`` and (SE2, SE3, Sim3) from the chordal relaxation of the kept
-    edges; the lower TLS objective wins, and within the solves' tolerance
-    (``relative_decrease``) the chordal one, which does not depend on where earlier solves
-    stopped. Returns (kept, result, its TLS objective). Loops re-admitted together can pull a
+    """``settle`` from ``values`` and from the chordal relaxation of the kept edges; the lower
+    TLS objective wins, and within the solves' tolerance (``relative_decrease``) the chordal
+    one, which does not depend on where earlier solves stopped. Returns (kept, result, its TLS objective). Loops re-admitted together can pull a
     region out of the basin that the values lie in; from chordal, a graph can also settle in a
     worse basin than the values lie in."""
     best = None
-    for restart in starts(graph):
+    for restart in (False, True):
         settled_kept, settled = settle(graph, mask, kept, values, width_sq, options, run, restart)
         objective = tls_objective(graph, settled.values, mask, width_sq)
         if best is None or objective <= best[2] * (1.0 + options.relative_decrease):

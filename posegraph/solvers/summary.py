@@ -28,7 +28,7 @@ class IterationRecord:
     elapsed: float
     """Seconds since the start of ``optimize``."""
     stage: str = ""
-    """The part of a robust run the iteration belongs to ("gnc round 3 (warm)"), else ""."""
+    """The part of a robust run the iteration belongs to ("gnc round 3 (chordal)"), else ""."""
 
 
 @dataclasses.dataclass(frozen=True)

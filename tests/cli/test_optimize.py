@@ -270,8 +270,8 @@ def test_progress_on_torus3d_and_gnc_with_false_loops_does_not_scroll(tmp_path, 
     screen, output = _terminal(["optimize", loops, "--robust", "gnc"])
     stages = _stage_lines(screen)
     rounds = {int(r) for r in re.findall(r"round (\d+)", output)}  # as the line was redrawn
-    warm = next(line for line in stages if line.startswith("✓ gnc (warm) "))
-    last = int(re.search(r"round (\d+)", warm)[1])
+    chordal = next(line for line in stages if line.startswith("✓ gnc (chordal) "))
+    last = int(re.search(r"round (\d+)", chordal)[1])
     assert len(rounds) >= 2 and last == max(rounds) > 5 and len(stages) < 12, stages
 
 

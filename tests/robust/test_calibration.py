@@ -73,7 +73,7 @@ def test_robust_mode_calibrates_where_the_information_hides_false_loops(simulate
     assert all(50 < scale < 200 for scale in calibration["scales"].values())
     assert calibration["solves"] == 2
     stages = [stage for stage, _ in itertools.groupby(r.stage for r in result.summary.iterations)]
-    assert stages.count("gnc round 1 (warm)") == 1
+    assert stages.count("gnc round 1 (chordal)") == 1
 
 
 def test_robust_mode_calibrates_where_its_width_rejects_true_loops():

@@ -80,13 +80,12 @@ def test_gnc_searches_with_its_own_initial_damping_unless_the_options_set_one():
     is the one after its iteration's update: at most twice the start (a rejection), at least a
     third of it (an acceptance, λ·(1/3) as the solver rounds it). The final solve iterates on
     the monocular sequence of 3% drift with weak scale information (on the city it starts
-    converged). Warm stages after the first go on at the λ the last one left
-    (``test_gnc_warm_stages_go_on_at_the_damping_the_last_one_left``)."""
+    converged). Every GNC stage starts from its chordal relaxation at ``gnc.INITIAL_DAMPING``."""
 
     def starts(graph, options):
         records = posegraph.optimize(graph, robust="gnc", options=options).summary.iterations
         firsts = [r for k, r in enumerate(records) if k == 0 or records[k - 1].stage != r.stage]
-        return {r.stage: r.damping for r in firsts if not _later_warm_stage(r.stage)}
+        return {r.stage: r.damping for r in firsts}
 
     sequence = monocular_sequence(drift=0.03, seed=1).sim3_graph(100.0)
     corrupted, _ = add_false_loops(sequence, 0.3, seed=1)
@@ -102,40 +101,6 @@ def test_gnc_searches_with_its_own_initial_damping_unless_the_options_set_one():
     assert {"final", "consistency (chordal)"} <= found.keys()
     for stage, damping in found.items():
         assert 1e-3 * (1.0 / 3.0) <= damping <= 2e-3, stage
-
-
-def _later_warm_stage(stage: str) -> bool:
-    return stage.startswith("gnc round") and stage.endswith("(warm)") and " 1 " not in stage
-
-
-def test_gnc_warm_stages_go_on_at_the_damping_the_last_one_left(shared_dataset):
-    """A warm stage starts Levenberg-Marquardt at the λ where the previous warm stage's last
-    iteration left it (at least ``gnc.INITIAL_DAMPING``): its first record's λ (after that
-    iteration's update) is within a third and twice of it, and most stages after the first
-    take steps (here four of five). Each restarted at ``gnc.INITIAL_DAMPING``, they rejected
-    every step of their few iterations on intel with false loops (λ reached 3e-6 where they
-    needed 1e-5), and the warm sequence never left least squares' solution. Stopped after six
-    warm stages."""
-    graph = posegraph.read_graph(str(shared_dataset("intel.g2o"))).graph
-    corrupted, _ = add_false_loops(graph, 0.1, seed=0)
-    result = posegraph.optimize(
-        corrupted, robust="gnc", callback=lambda record: record.stage == "gnc round 7 (warm)"
-    )
-    warm = [r for r in result.summary.iterations if r.stage.endswith("(warm)")]
-    pairs = [
-        (before, after)
-        for before, after in zip(warm, warm[1:], strict=False)
-        if before.stage != after.stage
-    ]
-    assert len(pairs) == 6
-    for before, after in pairs:
-        start = max(before.damping, gnc.INITIAL_DAMPING)
-        assert start * (1.0 / 3.0) <= after.damping <= 2 * start, after.stage
-    assert max(r.damping for r in warm) > 1e4 * gnc.INITIAL_DAMPING
-    stopped = pairs[-1][1].stage  # one iteration, then the callback stops the run
-    later = [after.stage for _, after in pairs if after.stage != stopped]
-    stepped = [stage for stage in later if any(r.accepted for r in warm if r.stage == stage)]
-    assert len(later) == 5 and len(stepped) >= 3, stepped
 
 
 def test_gnc_settles_from_its_values_too_where_chordal_lands_in_a_worse_basin(monkeypatch):
@@ -164,11 +129,10 @@ def test_gnc_settles_from_its_values_too_where_chordal_lands_in_a_worse_basin(mo
 
 def _stages_as_found(monkeypatch) -> None:
     """GNC's stages as they were when the local search's scenarios below were found: ten
-    iterations each, every warm one from ``gnc.INITIAL_DAMPING``, after least squares run to
-    convergence. The stages as they are reject the loops of those scenarios themselves."""
+    iterations each, after least squares run to convergence. The stages as they are reject the
+    loops of those scenarios themselves."""
     monkeypatch.setattr(gnc, "STAGE_ITERATIONS", 10)
     monkeypatch.setattr(gnc, "START_ITERATIONS", 100)
-    monkeypatch.setattr(gnc, "_continued", lambda options, result: options)
 
 
 def test_gnc_local_search_drops_a_false_loop_the_solution_bent_to_fit(shared_dataset, monkeypatch):
@@ -409,7 +373,7 @@ def test_a_gnc_run_reports_every_solve_and_stops_when_asked():
     assert np.all(np.diff([r.elapsed for r in history]) >= 0)
     stages = [r.stage for r in history]
     assert stages[0] == "least squares"
-    assert {"gnc round 1 (warm)", "gnc round 1 (chordal)", "consistency (chordal)"} <= set(stages)
+    assert {"gnc round 1 (chordal)", "consistency (chordal)"} <= set(stages)
     phases = sum(summary.phase_times.values())
     assert min(summary.phase_times.values()) >= 0
     assert 0.9 * (summary.total_time - summary.initialization_time) <= phases
@@ -419,14 +383,14 @@ def test_a_gnc_run_reports_every_solve_and_stops_when_asked():
 
     def stop_in_the_second_round(record):
         seen.append(record)
-        return record.stage == "gnc round 2 (warm)"
+        return record.stage == "gnc round 2 (chordal)"
 
     stopped = posegraph.optimize(corrupted.copy(), robust="gnc", callback=stop_in_the_second_round)
     assert stopped.summary.termination == posegraph.solvers.STOPPED
     assert not stopped.summary.converged
     assert stopped.summary.iterations == seen
-    assert seen[-1].stage == "gnc round 2 (warm)"
-    assert all(record.stage != "gnc round 2 (warm)" for record in seen[:-1])
+    assert seen[-1].stage == "gnc round 2 (chordal)"
+    assert all(record.stage != "gnc round 2 (chordal)" for record in seen[:-1])
     s = between_squares(stopped.values, corrupted.edges)
     loops = robust_mask(corrupted, "loops")
     width_sq = default_width(3, gnc_quantile(int(loops.sum()))) ** 2
