@@ -247,9 +247,11 @@ class Leverage:
         """H factorised, the probes z (K, m, d) and w = H⁻¹ Aᵀ z (num_nodes, d, K)."""
         return self._factored, *self._factored.rademacher(self.probes, self.seed)
 
+    @functools.cached_property
     def deleted_residuals(self) -> DeletedResiduals:
         """Deleted residuals of every between edge of the graph: exact where the backend inverts
-        selectively (CHOLMOD), else estimated from the probes (module docstring)."""
+        selectively (CHOLMOD), else estimated from the probes (module docstring); computed on
+        first use."""
         if inverts_selectively(self.linear_solver):
             return deleted_residuals(self.graph, self.values, linear_solver=self.linear_solver)
         factored, z, w = self._probed

@@ -127,7 +127,7 @@ def _drop(graph, mask, kept, result, objective, width_sq, options, leverage, run
     """Leave out, one at a time, the kept loops of largest deleted residual d² (from
     ``leverage`` at ``result``), keeping each removal that lowers the TLS ``objective`` of
     ``result``. Returns (kept, result or None, its TLS objective)."""
-    deleted = leverage.deleted_residuals()
+    deleted = leverage.deleted_residuals
     scores = np.zeros(graph.num_edges)
     scores[kept] = deleted.innovation
     # Dropping a loop lowers the objective by d² − min(s', c²) to first order (s' ≥ d², its s

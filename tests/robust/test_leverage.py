@@ -46,7 +46,7 @@ def test_deleted_residual_is_the_cost_that_leaving_the_edge_out_saves(make_graph
     solution = solve(graph, options)
     loops = _loops(graph)
     leverage = Leverage(graph, solution.values, probes=10000, seed=1, linear_solver=backend)
-    estimated = leverage.deleted_residuals()
+    estimated = leverage.deleted_residuals
     exact = deleted_residuals(graph, solution.values, edges=loops, linear_solver=backend)
     for k, edge in enumerate(loops):
         keep = np.ones(graph.num_edges, dtype=bool)
