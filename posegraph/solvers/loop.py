@@ -34,7 +34,7 @@ from ..graph import PoseGraph
 from ..problem.linear import NormalEquations
 from ..problem.linearization import EdgeWeighting, Linearized
 from .options import SolverOptions
-from .steps import STEPS, Proposal
+from .steps import STEPS, Proposal, inner
 from .summary import PHASES, IterationRecord, Result, Summary
 
 Callback = Callable[[IterationRecord], bool | None]
@@ -175,7 +175,7 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
     chord = None  # the next step, from the last factorisation (``_after_newton_step``)
     # |x| of the step test, at the start: it changes little over a run, and a Log of every
     # node per iteration would cost as much as a linearisation on small graphs.
-    size = float(np.linalg.norm(current.values.log()))
+    size = _norm(current.values.log())
 
     for iteration in range(1, options.max_iterations + 1):
         stop = _stop_before_step(options, assembled.gradient, clock)
@@ -190,7 +190,7 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
             termination, converged = PREDICTED_BELOW_TOLERANCE, True
             break
         trial = _trial(graph, system, weighting, current, proposal, clock)
-        step_norm = float(np.linalg.norm(proposal.step))
+        step_norm = _norm(proposal.step)
         accepted = bool(
             trial is not None and np.isfinite(trial.error) and trial.error < current.error
         )
@@ -225,6 +225,12 @@ def _iterate(graph, options, callback, system, weighting, clock, current, histor
                 termination, converged = PREDICTED_BELOW_TOLERANCE, True
                 break
     return current, termination, converged
+
+
+def _norm(array: np.ndarray) -> float:
+    """The Euclidean norm of all the entries (``steps.inner``, not BLAS)."""
+    flat = array.ravel()
+    return float(np.sqrt(inner(flat, flat)))
 
 
 def _stop_before_step(options: SolverOptions, gradient: np.ndarray, clock: _Clock):
@@ -290,7 +296,7 @@ def _after_newton_step(
     gradient = assembled.gradient
     step = -system.solve(gradient)
     clock.lap("solve")
-    chord = Proposal(step, -0.5 * float(gradient @ step), True, False, True)
+    chord = Proposal(step, -0.5 * inner(gradient, step), True, False, True)
     tolerance = options.relative_decrease * current.error
     if _promises_little(options, chord, current.error):
         return True, None

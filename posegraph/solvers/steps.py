@@ -47,6 +47,13 @@ def _damping_scale(
     return scale
 
 
+def inner(a: np.ndarray, b: np.ndarray) -> float:
+    """aᵀb of two vectors, summed by numpy's own loop: ``a @ b`` calls BLAS's ``ddot``, which
+    OpenBLAS splits over threads from 10,000 entries, and whose threads can wait milliseconds
+    for each other on a machine whose cores are busy."""
+    return float(np.einsum("i,i->", a, b))
+
+
 def _unmeasured_share(graph: PoseGraph, system) -> np.ndarray:
     """Each free coordinate's share of directions that nothing measures at first order
     (``observability.unmeasured_share``; module docstring), in ``system``'s variable order."""
@@ -90,7 +97,7 @@ class _LevenbergMarquardt:
         damping_share = (
             np.max(lam * scale / np.maximum(diagonal, options.min_diagonal)) if self.damped else 0.0
         )
-        predicted = 0.5 * float(step @ ((lam * scale * step if self.damped else 0.0) - gradient))
+        predicted = 0.5 * inner(step, (lam * scale * step if self.damped else 0.0) - gradient)
         return Proposal(step, predicted, step_ok, singular, bool(damping_share < 1e-3))
 
     def update(self, accepted: bool, decrease: float, proposal: Proposal) -> None:
@@ -163,7 +170,7 @@ class _Dogleg:
             step = cauchy + self._toward_boundary(cauchy, gauss_newton, radius) * (
                 gauss_newton - cauchy
             )
-        predicted = -float(gradient @ step) - 0.5 * float(step @ (self._hessian @ step))
+        predicted = -inner(gradient, step) - 0.5 * inner(step, self._hessian @ step)
         clock.lap("solve")
         self._scaled_norm = self._norm(step)
         newton = step is gauss_newton and self._held_back is None
@@ -180,8 +187,8 @@ class _Dogleg:
         self._stale = False
         self._hessian = system.matrix(data)
         direction = gradient / self._scale
-        curvature = float(direction @ (self._hessian @ direction))
-        alpha = float(gradient @ direction) / curvature if curvature > 0 else np.inf
+        curvature = inner(direction, self._hessian @ direction)
+        alpha = inner(gradient, direction) / curvature if curvature > 0 else np.inf
         self._cauchy = -alpha * direction if np.isfinite(alpha) else -direction
         if self.radius is None:
             start = self._gauss_newton if self._gauss_newton is not None else self._cauchy
@@ -206,14 +213,14 @@ class _Dogleg:
 
     def _norm(self, step: np.ndarray) -> float:
         """‖D^½ δ‖."""
-        return float(np.sqrt(step @ (self._scale * step)))
+        return float(np.sqrt(inner(step, self._scale * step)))
 
     def _toward_boundary(self, inside: np.ndarray, outside: np.ndarray, radius: float) -> float:
         """β in [0, 1] with ‖D^½ (a + β (b − a))‖ = Δ, for a inside the region and b outside."""
         between = outside - inside
-        a = float(between @ (self._scale * between))
-        b = 2.0 * float(inside @ (self._scale * between))
-        c = float(inside @ (self._scale * inside)) - radius * radius
+        a = inner(between, self._scale * between)
+        b = 2.0 * inner(inside, self._scale * between)
+        c = inner(inside, self._scale * inside) - radius * radius
         return (-b + np.sqrt(b * b - 4.0 * a * c)) / (2.0 * a)
 
     def update(self, accepted: bool, decrease: float, proposal: Proposal) -> None:
