@@ -130,9 +130,9 @@ def settle(graph, mask, kept, values, width_sq, options, run: Run, restart: bool
 def settle_best(graph, mask, kept, values, width_sq, options, run: Run):
     """``settle`` from ``values`` and from the chordal relaxation of the kept edges; the lower
     TLS objective wins, and within the solves' tolerance (``relative_decrease``) the chordal
-    one, which does not depend on where earlier solves stopped. Returns (kept, result, its TLS objective). Loops re-admitted together can pull a
-    region out of the basin that the values lie in; from chordal, a graph can also settle in a
-    worse basin than the values lie in."""
+    one, which does not depend on where earlier solves stopped. Returns (kept, result, its TLS
+    objective). Loops re-admitted together can pull a region out of the basin that the values
+    lie in; from chordal, a graph can also settle in a worse basin than the values lie in."""
     best = None
     for restart in (False, True):
         settled_kept, settled = settle(graph, mask, kept, values, width_sq, options, run, restart)
