@@ -19,11 +19,11 @@ calibration ends there, with the decisions from before it settled at it: the two
 otherwise alternate (parking-garage: its true loops' tail is heavier than the median scale
 allows). In least squares the inliers are the measurements that pass the test.
 
-A robust solve after a scaling does not graduate again: it settles the last decisions at the
-new width (GNC's consistency pass) and searches locally from them. Scaling every class alike
-leaves the least-squares solution over a kept set where it was and moves only the width
-relative to the residuals, which the consistency pass and the local search's re-admission
-and dropping follow.
+After a scaling that narrows the width, GNC runs anew (searching locally once the width
+holds): decisions settled from false loops kept stay bent around them. After any other, a
+robust solve settles the last decisions at the new width (GNC's consistency pass) and
+searches locally from them: scaling every class alike leaves the least-squares solution over
+a kept set where it was and moves only the width relative to the residuals.
 
 A robust run at the default width calibrates on its own where it kept gross outliers: false
 loops that an information overstating the noise let the kernel keep (parking-garage's states
@@ -267,31 +267,28 @@ def scale_information(graph: PoseGraph, scales: dict[str, float]) -> None:
 def calibrate(
     graph: PoseGraph,
     first: Result,
-    solve: Callable[[], Result],
+    solve: Callable[[Result], Result],
     automatic: bool,
     robust: bool,
     covered: tuple[str, ...] = (),
     second: Callable[[Result], tuple[Result, float] | None] | None = None,
-    anew: Callable[[Result], Result | None] | None = None,
+    anew: Callable[..., Result | None] | None = None,
 ) -> tuple[Result, Calibration | None, list[NoiseClass]]:
-    """Calibrates ``graph``'s information from a solve's ``first`` result, re-solving with
-    ``solve()`` (from the graph's values, which it sets to the last solution first) after each
-    scaling (module docstring): a robust solve settles the last solve's decisions at the new
-    width and searches from them. ``robust``: the inliers are what each solve did not reject;
-    where some are gross outliers the median scales apply, the tail scales after, and where a
-    scaling that lowered every precision brings gross outliers back (false loops re-admitted
-    at the wider width, or a tail heavier than the median scale allows), calibration ends
-    there, with the decisions from before it settled at the wider width. ``automatic``: only
-    where the first solve kept gross outliers, rejected measurements that the kept ones' noise
-    explains (``_consistent_rejections``; once settled, ``anew(result)``, GNC anew at the
-    calibrated width, may replace the result), or ``second(first)`` replaces it
-    (``robust.second_opinion``: a narrower width's result and its precision factor; else the
-    graph is untouched and the calibration None); every class scaled alike, by the smallest
-    scale of the classes under the kernel (``covered``), none guessed from what was rejected.
-    Returns the last result, the calibration, and the noise consistency of what it kept."""
+    """Calibrates ``graph``'s information from a solve's ``first`` result (module docstring),
+    re-solving after each scaling with ``solve(last)`` from the last solution: a robust solve
+    settles the decisions of the solve that ended at ``last`` and searches from them, or GNC
+    runs anew after a narrowing (``_resolve``). ``robust``: the inliers are what each solve
+    kept; with gross outliers among them the median scales apply, the tail scales after, and
+    where a widening brings gross outliers back, calibration ends there. ``automatic``: only
+    where the first solve kept gross outliers, rejected measurements that the kept ones'
+    noise explains (``_consistent_rejections``; once settled, ``anew(result)`` may replace the
+    result), or ``second(first)`` replaces it (``robust.second_opinion``); every class scaled
+    alike, by the smallest scale of those under the kernel (``covered``). Returns the last
+    result, the calibration (None where none ran), and the noise consistency of what it kept."""
     result, total, solves, classes, narrower = first, dict.fromkeys(KINDS, 1.0), 0, [], None
     consistent, present = 0, tuple(KINDS[kind] for kind in np.unique(measurement_kinds(graph)))
     stalled = widened = False  # the last scaling: changed no decision; lowered every precision
+    unsearched = False  # the last result is GNC's anew, without its local search
     while True:
         checking = automatic and solves == 0
         found = _estimate_at(graph, result, robust, automatic)
@@ -307,23 +304,39 @@ def calibrate(
             continue
         scales = _scaling(found, robust, automatic, covered, present)
         settled = all(1 / SETTLED <= s <= SETTLED for s in scales.values())
-        if solves == ROUNDS or settled or stalled or (robust and widened and found.gross):
+        if solves >= ROUNDS or settled or stalled or (robust and widened and found.gross):
+            if unsearched:  # GNC anew at the last width: its decisions settled and searched
+                (result, unsearched), solves = _resolve(graph, result, solve), solves + 1
+                continue
             if not consistent or anew is None or (fresh := anew(result)) is None:
                 break
             result, solves, anew = fresh, solves + 1, None
             continue
         scale_information(graph, scales)
         total.update((kind, total[kind] * scale) for kind, scale in scales.items())
-        graph.set_values(result.values, check=False)
         before = kept(graph, result)
         widened = solves > 0 and not found.gross and all(scale <= 1.0 for scale in scales.values())
-        result, solves = solve(), solves + 1
+        narrowed = robust and all(scale > SETTLED for scale in scales.values())
+        (result, unsearched), solves = _resolve(graph, result, solve, narrowed and anew), solves + 1
         stalled = robust and all(map(np.array_equal, before, kept(graph, result)))
     if automatic and solves == 0:
         return result, None, classes
     scales = {kind: total[kind] for kind in present}
     calibration = Calibration(scales, automatic, solves, narrower is not None, consistent)
     return result, calibration, classes
+
+
+def _resolve(graph: PoseGraph, result: Result, solve, anew=None) -> tuple[Result, bool]:
+    """The solve after a scaling, and whether it is GNC's anew without its local search: that
+    (``anew(result, search=False)``) where given and its TLS objective is lower than
+    ``result``'s, after a scaling that raised every precision beyond ``SETTLED`` (decisions
+    settled from a run that kept false loops stay bent around them); else ``solve(result)``,
+    also once the width holds after GNC anew (one solve beyond ``ROUNDS`` at most)."""
+    fresh = anew(result, search=False) if anew else None
+    if fresh is not None:
+        return fresh, True
+    graph.set_values(result.values, check=False)
+    return solve(result), False
 
 
 def _estimate_at(

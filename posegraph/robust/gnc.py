@@ -134,10 +134,10 @@ def gnc_tls(
     kept: np.ndarray | None = None,
     start: np.ndarray | None = None,
     graduate: bool = True,
+    search: bool = True,
 ) -> GncOutcome:
-    """GNC-TLS over the between edges in ``mask`` (the others are trusted), from the graph's
-    values; ``width`` c is the largest inlier residual, in Mahalanobis units: one for every
-    edge, or one per edge (n,).
+    """GNC-TLS over the between edges in ``mask`` (the others trusted), from the graph's
+    values; ``width`` c, the largest inlier residual in Mahalanobis units, is one or per edge.
 
     ``callback`` receives every iteration of every solve (``IterationRecord.stage`` says which).
     When it returns True, or when ``options.time_limit`` has passed since the run began, the
@@ -152,13 +152,14 @@ def gnc_tls(
     the kept edges are solved for in least squares, and the others are rejected. ``start``,
     decisions that may still hold (an earlier run's, with what was added since kept), replaces
     steps 1–3 if least squares over them settles as it is, and competes with them otherwise
-    (``_settle_decisions``); the local search follows either way. Without ``graduate``, steps
-    1–3 never run: ``start`` is settled as in step 3 (``settle_best``) and searched from there,
-    as calibration's re-solves after a scaling do (``robust.calibration``)."""
+    (``_settle_decisions``); the local search follows, but not without ``search`` (GNC anew
+    at a width that calibration may change again). Without ``graduate``, steps 1–3 never run:
+    ``start`` is settled as in step 3 (``settle_best``) and searched from there, as
+    calibration's re-solves do (``robust.calibration``)."""
     options = options or SolverOptions()
-    search = options
+    search_options = options
     if options.initial_damping is None:
-        search = dataclasses.replace(options, initial_damping=INITIAL_DAMPING)
+        search_options = dataclasses.replace(options, initial_damping=INITIAL_DAMPING)
     width_sq = np.broadcast_to(np.square(width, dtype=float), graph.num_edges)
     run = Run(callback, options)
     from_start = False
@@ -169,7 +170,7 @@ def gnc_tls(
             kept = ~mask | (between_squares(result.values, graph.edges) <= width_sq)
         elif kept is None:
             kept, searched, from_start = _search(
-                graph, mask, width_sq, search, run, start, graduate
+                graph, mask, width_sq, search_options, run, start, graduate, search
             )
             work = graph.with_edges(kept)
             work.set_values(searched.values, check=False)
@@ -186,12 +187,15 @@ def gnc_tls(
     )
 
 
-def _search(graph, mask, width_sq, options, run: Run, start=None, graduate: bool = True):
+def _search(
+    graph, mask, width_sq, options, run: Run, start=None, graduate: bool = True, search=True
+):
     """GNC's steps 1–4 (module docstring); returns (kept edges, the final solve, whether it
     began at ``start``). ``start``, the kept edges of an earlier run extended by what was
     appended since, replaces steps 1–3 where least squares over it settles as it is, and
     competes with them where it settles only after a change (``_settle_decisions``); without
-    ``graduate``, it is settled as step 3 settles GNC's decisions, and steps 1–3 never run."""
+    ``graduate``, it is settled as step 3 settles GNC's decisions, and steps 1–3 never run.
+    Without ``search``, step 4 does not run after steps 1–3."""
     if start is not None and not graduate:
         settled = settle_best(graph, mask, start, graph.values, width_sq, options, run)
         kept, result = local_search(graph, mask, *settled, width_sq, options, run)
@@ -206,6 +210,8 @@ def _search(graph, mask, width_sq, options, run: Run, start=None, graduate: bool
         graduated = _graduated(graph, mask, width_sq, options, run)
         if settled is None or graduated[2] <= settled[2]:
             settled, from_start = graduated, False
+    if not search:
+        return settled[0], settled[1], from_start
     kept, result = local_search(graph, mask, *settled, width_sq, options, run)
     return kept, result, from_start
 

@@ -66,11 +66,12 @@ def robust_solve(
     standing: np.ndarray | None = None,
     decisions: np.ndarray | None = None,
     graduate: bool = True,
+    search: bool = True,
 ) -> RobustOutcome:
     """A robust solve from the graph's values. ``standing``, GNC's decisions that stand (the
     measurements to keep), skips GNC's search; ``decisions``, the last GNC run's carried to this
     graph, may start it, and without ``graduate`` only settle and search from there
-    (``gnc.gnc_tls``). An IRLS kernel over the between edges alone solves through
+    (``gnc.gnc_tls``); without ``search``, GNC does not search locally. An IRLS kernel over the between edges alone solves through
     ``warm_solve``."""
     work = robust_problem(graph, kernel)
     reused: tuple[str, ...] = ()
@@ -84,6 +85,7 @@ def robust_solve(
             kept=standing,
             start=decisions,
             graduate=graduate,
+            search=search,
         )
         result, rejected = outcome.result, outcome.rejected
         if outcome.from_start:

@@ -54,13 +54,14 @@ def fits_median_worse(
 @dataclasses.dataclass(frozen=True)
 class FromStart:
     """GNC runs anew from the ``start`` of a robust call at the default width, which
-    calibration asks for: ``solve()`` runs GNC from the graph's values, which these set to
-    ``start``, at the graph's information as it then is."""
+    calibration asks for: ``solve(search=...)`` runs GNC from the graph's values, which these
+    set to ``start``, at the graph's information as it then is, with its local search or
+    without."""
 
     graph: PoseGraph
     kernel: Kernel
     start: LieGroup
-    solve: Callable[[], Result]
+    solve: Callable[..., Result]
 
     def second_opinion(self, first: Result) -> tuple[Result, float] | None:
         """The narrower run's result and its precision factor where ``first``, a GNC run from
@@ -82,16 +83,18 @@ class FromStart:
         graph.edges, graph.priors = narrower
         return result, NARROWER
 
-    def anew(self, settled: Result) -> Result | None:
+    def anew(self, settled: Result, search: bool = True) -> Result | None:
         """GNC anew at the graph's information, its result where its TLS objective there is
         lower than that of ``settled``: decisions settled from a first run whose width was
-        too narrow can stay bent around the true loops it rejected. Else None."""
-        result = self._run()
+        too narrow can stay bent around the true loops it rejected, and decisions settled at
+        a narrower width from a run that kept false loops stay bent around them. Else None.
+        Without ``search``, GNC does not search locally."""
+        result = self._run(search)
         return result if self._objective(result.values) < self._objective(settled.values) else None
 
-    def _run(self) -> Result:
+    def _run(self, search: bool = True) -> Result:
         self.graph.set_values(self.start, check=False)
-        return self.solve()
+        return self.solve(search=search)
 
     def _objective(self, values: LieGroup) -> float:
         """The TLS cost that GNC minimises, at ``values``."""

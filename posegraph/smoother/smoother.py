@@ -5,7 +5,6 @@ normal equations with their sparsity pattern, symbolic factorisation and lineari
 from __future__ import annotations
 
 import dataclasses
-import functools
 import time
 
 import numpy as np
@@ -36,6 +35,7 @@ class _Start:
     standing: np.ndarray | None = None
     decisions: np.ndarray | None = None
     graduate: bool = True
+    search: bool = True
 
 
 class Smoother:
@@ -222,7 +222,7 @@ class Smoother:
         if kernel is None:
             result = self._solve_warm(graph, options, callback)
             return result, np.ones(graph.num_edges), np.ones(len(graph.priors))
-        carried = (start.standing, start.decisions, start.graduate)
+        carried = (start.standing, start.decisions, start.graduate, start.search)
         outcome = robust_solve(graph, kernel, options, callback, self._solve_warm, *carried)
         return outcome.result, outcome.edge_weights, outcome.prior_weights
 
@@ -236,8 +236,7 @@ class Smoother:
     ) -> tuple[Result, np.ndarray, np.ndarray]:
         """``calibrate_noise`` (``calibration.calibrate``) after the first solve, where asked or,
         with None, in GNC at the default width; the summary records the noise check and the
-        calibration. A GNC solve after a scaling settles the last solve's decisions and searches
-        locally from them, without graduating again."""
+        calibration."""
         automatic = calibrate_noise is None
         if automatic:
             calibrate_noise = kernel is not None and kernel.spec.gnc and kernel.spec.width is None
@@ -246,11 +245,12 @@ class Smoother:
             return solved
         solves = [solved]
 
-        def again(graduate: bool = False) -> Result:  # graduate: GNC anew, a second opinion
-            decisions = None
-            if kernel is not None and kernel.spec.gnc and not graduate:
-                decisions = np.concatenate(solves[-1][1:])[: len(kernel.measured)] > 0
-            start = _Start("calibration", decisions=decisions, graduate=graduate)
+        def again(after: Result | None = None, search: bool = True) -> Result:
+            decisions = None  # GNC anew; else settled from those of the solve ending at after
+            if kernel is not None and kernel.spec.gnc and after is not None:
+                weights = next(solve[1:] for solve in solves if solve[0] is after)
+                decisions = np.concatenate(weights)[: len(kernel.measured)] > 0
+            start = _Start("calibration", (), False, None, decisions, after is None, search)
             solves.append(self._solve(start, kernel, options, callback))
             return solves[-1][0]
 
@@ -259,7 +259,7 @@ class Smoother:
         second = anew = None
         if automatic and kernel is not None:  # GNC at the default width, from these values
             values = self.graph.values[np.arange(self.graph.num_nodes)]
-            runs = FromStart(self.graph, kernel, values, functools.partial(again, True))
+            runs = FromStart(self.graph, kernel, values, again)
             second, anew = runs.second_opinion, runs.anew
         result, calibration, noise = calibrate(
             self.graph, solved[0], again, automatic, kernel is not None, covered, second, anew

@@ -56,8 +56,9 @@ def test_calibration_restores_each_class_s_information(simulated):
 
 def test_robust_mode_calibrates_where_the_information_hides_false_loops(simulated):
     """With the information stating 100× the noise, GNC's default width keeps false loops;
-    robust mode finds that, scales the information, and rejects them. The solves after a
-    scaling settle the decisions and search locally from them: GNC graduates once."""
+    robust mode finds that, scales the information, and rejects them. After each scaling that
+    narrows the width, GNC graduates anew without its local search; once the width holds, the
+    last solve settles its decisions and searches from them without graduating."""
     graph, _ = simulated
     corrupted, false = add_false_loops(_scaled(graph, 1e-2, 1e-2), 0.3, seed=0)
     left = posegraph.optimize(corrupted.copy(), robust="gnc", calibrate_noise=False)
@@ -71,9 +72,13 @@ def test_robust_mode_calibrates_where_the_information_hides_false_loops(simulate
     calibration = result.summary.calibration
     assert calibration["automatic"] is True
     assert all(50 < scale < 200 for scale in calibration["scales"].values())
-    assert calibration["solves"] == 2
+    assert calibration["solves"] == 3
     stages = [stage for stage, _ in itertools.groupby(r.stage for r in result.summary.iterations)]
-    assert stages.count("gnc round 1 (chordal)") == 1
+    graduations = [i for i, stage in enumerate(stages) if stage == "gnc round 1 (chordal)"]
+    assert len(graduations) == 3  # the first run's and two after a scaling
+    searched = {"re-admit", "drop"}
+    assert searched & set(stages[: graduations[1]])  # the first run searched
+    assert not searched & set(stages[graduations[1] : graduations[2]])  # the next did not
 
 
 def test_robust_mode_calibrates_where_its_width_rejects_true_loops():
@@ -152,7 +157,7 @@ def test_calibration_ends_where_a_widening_brings_gross_outliers_back(monkeypatc
     monkeypatch.setattr(calibration, "estimate", lambda *args, **kwargs: next(script))
     solved = []
 
-    def solve():
+    def solve(last):
         summary = dataclasses.replace(first.summary, rejected_edges=[len(solved)])
         solved.append(dataclasses.replace(first, summary=summary))
         return solved[-1]

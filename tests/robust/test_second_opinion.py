@@ -41,8 +41,8 @@ def _runs(graph, kernel, start, values, seen):
     """GNC's runs from ``start`` on ``graph``, scripted to end at ``values``; each records the
     information and the values it starts from."""
 
-    def solve():
-        seen.append((graph.edges.information, graph.values))
+    def solve(search: bool = True):
+        seen.append((graph.edges.information, graph.values, search))
         return values
 
     return second_opinion.FromStart(graph, kernel, start, solve)
@@ -62,10 +62,11 @@ def test_the_narrower_run_replaces_a_worse_solution_and_keeps_its_precision(prob
     taken = _runs(work, kernel, start, solved, seen).second_opinion(bent)
     assert taken is not None and taken[0] is solved
     assert taken[1] == second_opinion.NARROWER
-    ((information, values),) = seen
+    ((information, values, searched),) = seen
     narrower = second_opinion.NARROWER * graph.edges.information  # every precision
     assert np.allclose(information, narrower, rtol=1e-12, atol=0)
     assert np.allclose(values.as_matrix(), start.as_matrix())  # GNC anew from the start
+    assert searched  # with its local search
     assert np.allclose(work.edges.information, narrower, rtol=1e-12, atol=0)
 
 
@@ -102,7 +103,8 @@ def test_calibration_goes_on_from_a_second_opinion_taken(problem, monkeypatch):
         asked.append(first)
         return solved, 100.0
 
-    def solve():
+    def solve(last):
+        assert last is solved  # settles the decisions of the second opinion's solve
         solved_again.append(solved)
         return solved
 
@@ -119,10 +121,13 @@ def test_gnc_anew_replaces_a_settled_solution_only_where_its_objective_is_lower(
     graph, kernel, start, solved, bent = problem
     work, seen = graph.copy(), []
     assert _runs(work, kernel, start, solved, seen).anew(bent) is solved
-    ((information, values),) = seen
+    ((information, values, searched),) = seen
     assert np.array_equal(information, graph.edges.information)  # at the graph's information
     assert np.allclose(values.as_matrix(), start.as_matrix())  # from the start
+    assert searched  # with its local search unless asked
     assert _runs(work, kernel, start, bent, seen).anew(solved) is None
+    assert _runs(work, kernel, start, solved, seen).anew(bent, search=False) is solved
+    assert seen[-1][2] is False
 
 
 @pytest.mark.parametrize("lower", [True, False])
@@ -141,14 +146,50 @@ def test_calibration_runs_gnc_anew_where_consistent_rejections_set_it_off(
     monkeypatch.setattr(calibration, "estimate", lambda *args, **kwargs: next(script))
     asked = []
 
-    def anew(settled):
+    def anew(settled, search=True):
+        assert search  # once settled, GNC anew searches locally
         asked.append(settled)
         return solved if lower else None
 
     result, found, _ = calibration.calibrate(
-        graph.copy(), bent, lambda: bent, True, True, (kind,), anew=anew
+        graph.copy(), bent, lambda last: bent, True, True, (kind,), anew=anew
     )
     assert asked == [bent]
     assert result is (solved if lower else bent)
     assert found.solves == (2 if lower else 1) and found.consistent_rejections == 5
     assert found.scales[kind] == pytest.approx(0.1)
+
+
+@pytest.mark.parametrize("lower", [True, False])
+def test_a_narrowing_scaling_runs_gnc_anew_and_searches_once_the_width_holds(
+    problem, monkeypatch, lower
+):
+    """``calibrate``'s check found gross outliers kept under a width 4× too wide: GNC runs anew
+    at the narrower width without its local search, and where its result is taken (its TLS
+    objective was lower), the next solve settles its decisions and searches from them once
+    the scales hold; where it is not, the decisions of the first run are settled instead."""
+    graph, _, _, solved, bent = problem
+    kind = "loop closures"
+    script = iter(
+        [calibration.Estimate({kind: 4.0}, {kind: 4.0}, [], 3)]
+        + [calibration.Estimate({kind: 1.0}, {kind: 1.0}, [], 0)] * 2
+    )
+    monkeypatch.setattr(calibration, "estimate", lambda *args, **kwargs: next(script))
+    asked, settled_from = [], []
+    searched = _turned(solved, 0.001)
+
+    def anew(last, search=True):
+        asked.append((last, search))
+        return solved if lower else None
+
+    def solve(last):
+        settled_from.append(last)
+        return searched
+
+    result, found, _ = calibration.calibrate(
+        graph.copy(), bent, solve, True, True, (kind,), anew=anew
+    )
+    assert asked == [(bent, False)]
+    assert settled_from == [solved if lower else bent] and result is searched
+    assert found.solves == (2 if lower else 1)
+    assert found.scales[kind] == pytest.approx(4.0)
