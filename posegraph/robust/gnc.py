@@ -148,14 +148,14 @@ def gnc_tls(
     0, nothing is searched: the values stand, and the edges of the mask with s > c² at them are
     rejected, as when the run is stopped.
 
-    ``kept``, decisions known to stand (the edges to keep, ``smoother.warm_start``), skips the search:
-    the kept edges are solved for in least squares, and the others are rejected. ``start``,
-    decisions that may still hold (an earlier run's, with what was added since kept), replaces
-    steps 1–3 if least squares over them settles as it is, and competes with them otherwise
-    (``_settle_decisions``); the local search follows, but not without ``search`` (GNC anew
-    at a width that calibration may change again). Without ``graduate``, steps 1–3 never run:
-    ``start`` is settled as in step 3 (``settle_best``) and searched from there, as
-    calibration's re-solves do (``robust.calibration``)."""
+    ``kept``, decisions known to stand (``smoother.warm_start``), skips the search: the kept
+    edges are solved for in least squares, and the others are rejected. ``start``, decisions
+    that may still hold (an earlier run's, with what was added since kept), replaces steps 1–3
+    if least squares over them settles as it is, and competes with them otherwise
+    (``_settle_decisions``); the local search follows. Without ``search``, only steps 1–2 and
+    5 run (GNC anew at a width that calibration may change again). Without ``graduate``, steps
+    1–3 never run: ``start`` is settled as in step 3 (``settle_best``) and searched from there,
+    as calibration's re-solves do (``robust.calibration``)."""
     options = options or SolverOptions()
     search_options = options
     if options.initial_damping is None:
@@ -195,7 +195,7 @@ def _search(
     appended since, replaces steps 1–3 where least squares over it settles as it is, and
     competes with them where it settles only after a change (``_settle_decisions``); without
     ``graduate``, it is settled as step 3 settles GNC's decisions, and steps 1–3 never run.
-    Without ``search``, step 4 does not run after steps 1–3."""
+    Without ``search``, steps 3–4 do not run after steps 1–2."""
     if start is not None and not graduate:
         settled = settle_best(graph, mask, start, graph.values, width_sq, options, run)
         kept, result = local_search(graph, mask, *settled, width_sq, options, run)
@@ -207,7 +207,7 @@ def _search(
     )
     from_start = settled is not None
     if not as_given:
-        graduated = _graduated(graph, mask, width_sq, options, run)
+        graduated = _graduated(graph, mask, width_sq, options, run, settle=search)
         if settled is None or graduated[2] <= settled[2]:
             settled, from_start = graduated, False
     if not search:
@@ -216,8 +216,11 @@ def _search(
     return kept, result, from_start
 
 
-def _graduated(graph, mask, width_sq, options, run: Run) -> tuple[np.ndarray, Result, float]:
-    """GNC's steps 1–3 from the graph's values: (kept edges, their solve, its TLS objective)."""
+def _graduated(
+    graph, mask, width_sq, options, run: Run, settle: bool = True
+) -> tuple[np.ndarray, Result, float]:
+    """GNC's steps 1–3 from the graph's values (without ``settle``, 1–2): (kept edges, their
+    solve, its TLS objective)."""
     least_squares = dataclasses.replace(
         options,
         max_iterations=min(options.max_iterations, START_ITERATIONS),
@@ -225,7 +228,10 @@ def _graduated(graph, mask, width_sq, options, run: Run) -> tuple[np.ndarray, Re
     )
     start = run.solve(graph, least_squares, "least squares")
     result, weights = _stages(graph, mask, width_sq, options, start, run)
-    return settle_best(graph, mask, ~mask | (weights > 0.5), result.values, width_sq, options, run)
+    kept = ~mask | (weights > 0.5)
+    if not settle:
+        return kept, result, tls_objective(graph, result.values, mask, width_sq)
+    return settle_best(graph, mask, kept, result.values, width_sq, options, run)
 
 
 def _settle_decisions(graph, mask, kept, width_sq, options, run: Run):
