@@ -18,7 +18,7 @@ from ..robust.run import cost, robust_solve, with_robust_record
 from ..robust.second_opinion import FromStart
 from ..robust.spec import Kernel, RobustSpec, resolve
 from ..solvers import STOPPED, TIME_LIMIT, Callback, Result, SolverOptions, solve
-from ..solvers.summary import in_turn_summary
+from ..solvers.summary import in_turn_summary, named_stages
 from . import warm_start
 from .fixed_lag import FixedLag
 from .solution import GncProblem, Solution
@@ -245,13 +245,13 @@ class Smoother:
             return solved
         solves = [solved]
 
-        def again(after: Result | None = None, search: bool = True) -> Result:
+        def again(after: Result | None = None, search=True, stage="calibrated") -> Result:
             decisions = None  # GNC anew; else settled from those of the solve ending at after
             if kernel is not None and kernel.spec.gnc and after is not None:
                 weights = next(solve[1:] for solve in solves if solve[0] is after)
                 decisions = np.concatenate(weights)[: len(kernel.measured)] > 0
             start = _Start("calibration", (), False, None, decisions, after is None, search)
-            solves.append(self._solve(start, kernel, options, callback))
+            solves.append(self._solve(start, kernel, options, named_stages(callback, stage)))
             return solves[-1][0]
 
         began = time.perf_counter()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from ..lie import LieGroup
@@ -161,4 +162,14 @@ def in_turn_summary(
     rest = seconds - sum(each.total_time for each in summaries[1:])
     return dataclasses.replace(
         summary, iterations=in_turn(summaries), phase_times={**phases, work: rest}
+    )
+
+
+def named_stages(callback: Callable | None, stage: str) -> Callable | None:
+    """``callback``, shown each record of a named stage as "STAGE · stage" (a robust run's
+    solves within a calibration, say); None without one."""
+    if callback is None:
+        return None
+    return lambda record: callback(
+        dataclasses.replace(record, stage=f"{stage} · {record.stage}") if record.stage else record
     )

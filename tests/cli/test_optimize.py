@@ -239,7 +239,8 @@ def test_progress_is_one_updating_line_per_stage(tmp_path, command, options):
     assert "initialising" in names
     damping = "radius" if "dogleg" in options else "λ"
     iterating = [line for line in stages if " it " in line]
-    assert iterating and all(damping in line for line in iterating), stages
+    whole = [line for line in iterating if not line.endswith("…")]  # not cut to the width
+    assert whole and all(damping in line for line in whole), stages
     if "--robust" in options:
         assert "least squares" in names and "iterating" not in names, stages
         assert all("½Σ w rᵀΩr" in line for line in iterating)

@@ -41,7 +41,7 @@ def _runs(graph, kernel, start, values, seen):
     """GNC's runs from ``start`` on ``graph``, scripted to end at ``values``; each records the
     information and the values it starts from."""
 
-    def solve(search: bool = True):
+    def solve(search: bool = True, stage: str = "calibrated"):
         seen.append((graph.edges.information, graph.values, search))
         return values
 
@@ -80,11 +80,39 @@ def test_a_narrower_run_that_ends_worse_leaves_the_information_as_it_was(problem
     assert work.edges is edges and work.priors is priors
 
 
-def test_a_solution_that_fits_the_median_loop_better_is_not_second_guessed(problem):
+def _rejecting(result, edges: list[int]):
+    """``result`` as a robust run that rejected ``edges``."""
+    return dataclasses.replace(
+        result, summary=dataclasses.replace(result.summary, rejected_edges=edges)
+    )
+
+
+def test_a_solution_that_fits_the_median_loop_better_and_rejected_some_is_not_second_guessed(
+    problem,
+):
     graph, kernel, start, solved, _ = problem
     work, seen = graph.copy(), []
-    taken = _runs(work, kernel, start, solved, seen).second_opinion(solved)
+    loop = int(np.flatnonzero(kernel.measured)[0])
+    taken = _runs(work, kernel, start, solved, seen).second_opinion(_rejecting(solved, [loop]))
     assert taken is None and seen == []
+
+
+@pytest.mark.parametrize(("turn", "taken"), [(5e-4, True), (1e-4, False)])
+def test_a_solution_that_kept_every_loop_is_judged_by_the_median_loop(problem, turn, taken):
+    """A run that rejected nothing, fitting the median loop better than its start: the
+    narrower run (here ending at the least-squares solution) replaces it where its median loop
+    closure's s is more than ``OFF_BY`` times lower (a map crumpled to fit false loops within
+    a width far wider than the noise), whatever the TLS objectives at the file's information."""
+    graph, kernel, start, solved, _ = problem
+    first = _turned(solved, turn)  # median s of the loops: 19x and 1.8x the solution's
+    measured = kernel.measured[: graph.num_edges]
+    assert not second_opinion.fits_median_worse(graph, measured, start, first.values)
+    work, seen = graph.copy(), []
+    edges = work.edges
+    opinion = _runs(work, kernel, start, solved, seen).second_opinion(first)
+    assert len(seen) == 1  # asked
+    assert (opinion is not None) is taken
+    assert (work.edges is edges) is not taken  # the narrower information kept where taken
 
 
 def test_calibration_goes_on_from_a_second_opinion_taken(problem, monkeypatch):
