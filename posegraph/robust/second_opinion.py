@@ -19,7 +19,7 @@ residuals' variance). Its median loop closure fits better than dead reckoning, a
 file's information its TLS objective is lower than that of the true map, which pays c² for
 each false loop; but the true map fits the median loop closure far better. There the narrower
 run's solution replaces the first where its median loop closure's s is more than ``OFF_BY``
-times lower (a file without outliers sees its median move by a factor of about 2).
+times lower (on files without outliers, it is at most a few per cent lower, or higher).
 
 Where GNC's first width was too narrow instead (it rejected true loops that the noise of what
 it kept explains, ``calibration``), the decisions that calibration settles from that run at the
