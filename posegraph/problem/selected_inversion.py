@@ -20,6 +20,7 @@ shape are computed together, as stacks.
 from __future__ import annotations
 
 import numpy as np
+import threadpoolctl
 
 TRIANGULAR_LEAF = 64
 """Lower-triangular blocks up to this width are inverted by numpy's LU ``inv``; wider ones by
@@ -179,7 +180,13 @@ class _Fronts:
 
 def selected_inverse(factor: SupernodalFactor, columns: np.ndarray) -> SelectedInverse:
     """Σ = (L Lᵀ)⁻¹ in L's pattern, computed in the supernodes that hold ``columns`` and their
-    ancestors."""
+    ancestors, with BLAS on one thread (numpy's OpenBLAS 0.3.31 crashed on two, in the
+    products of a factor with a 16,389-column front: ``docs/architecture.md``)."""
+    with threadpoolctl.threadpool_limits(limits=1, user_api="blas"):
+        return _selected_inverse(factor, columns)
+
+
+def _selected_inverse(factor: SupernodalFactor, columns: np.ndarray) -> SelectedInverse:
     needed = factor.path_to_root(columns)
     shapes = np.stack([factor.depth[needed], factor.width[needed], factor.height[needed]])
     keys, group = np.unique(shapes, axis=1, return_inverse=True)

@@ -6,7 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import scipy.sparse
+import threadpoolctl
 
+from posegraph.problem import selected_inversion
 from posegraph.problem.backends import available_backends, make_cholesky
 from posegraph.problem.selected_inversion import (
     TRIANGULAR_LEAF,
@@ -56,6 +58,27 @@ def test_selected_inverse_is_the_inverse_in_the_factors_pattern():
     factor = _factor(matrix)
     assert factor.width.max() > 1 and factor.first.size > 5  # supernodes, and several
     _assert_inverse_in_pattern(matrix, factor, rtol=1e-10)
+
+
+def test_selected_inversion_runs_blas_on_one_thread(monkeypatch):
+    """numpy's OpenBLAS crashed on two threads in the products of a factor with a 16,389-column
+    front (w10000 with 30% false loops); selected inversion limits BLAS to one thread, and
+    gives it back its threads after."""
+    seen = []
+    inner = selected_inversion._selected_inverse
+
+    def recording(factor, columns):
+        blas = threadpoolctl.threadpool_info()
+        seen.append([pool["num_threads"] for pool in blas if pool["user_api"] == "blas"])
+        return inner(factor, columns)
+
+    monkeypatch.setattr(selected_inversion, "_selected_inverse", recording)
+    before = [p["num_threads"] for p in threadpoolctl.threadpool_info() if p["user_api"] == "blas"]
+    matrix = _sparse_spd(30, seed=2)
+    _assert_inverse_in_pattern(matrix, _factor(matrix), rtol=1e-10)
+    assert seen and all(threads == 1 for threads in seen[0]) and seen[0]
+    after = [p["num_threads"] for p in threadpoolctl.threadpool_info() if p["user_api"] == "blas"]
+    assert after == before
 
 
 @pytest.mark.parametrize(
