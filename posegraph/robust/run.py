@@ -71,8 +71,8 @@ def robust_solve(
     """A robust solve from the graph's values. ``standing``, GNC's decisions that stand (the
     measurements to keep), skips GNC's search; ``decisions``, the last GNC run's carried to this
     graph, may start it, and without ``graduate`` only settle and search from there
-    (``gnc.gnc_tls``); without ``search``, GNC does not search locally. An IRLS kernel over the between edges alone solves through
-    ``warm_solve``."""
+    (``gnc.gnc_tls``); without ``search``, GNC does not search locally. An IRLS kernel over the
+    between edges alone solves through ``warm_solve``."""
     work = robust_problem(graph, kernel)
     reused: tuple[str, ...] = ()
     if kernel.spec.gnc:

@@ -81,7 +81,8 @@ class FromStart:
         graph = self.graph
         measured = self.kernel.measured[: graph.num_edges]
         worse = fits_median_worse(graph, measured, self.start, first.values)
-        kept_all = measured.any() and not first.summary.rejected_edges
+        summary = first.summary
+        kept_all = measured.any() and not (summary.rejected_edges or summary.rejected_priors)
         if not worse and not kept_all:
             return None
         information = graph.edges, graph.priors

@@ -246,11 +246,11 @@ class Smoother:
         solves = [solved]
 
         def again(after: Result | None = None, search=True, stage="calibrated") -> Result:
-            decisions = None  # GNC anew; else settled from those of the solve ending at after
-            if kernel is not None and kernel.spec.gnc and after is not None:
+            decisions, graduate = None, after is None  # GNC anew, else settled from after's
+            if kernel is not None and kernel.spec.gnc and not graduate:
                 weights = next(solve[1:] for solve in solves if solve[0] is after)
                 decisions = np.concatenate(weights)[: len(kernel.measured)] > 0
-            start = _Start("calibration", (), False, None, decisions, after is None, search)
+            start = _Start("calibration", decisions=decisions, graduate=graduate, search=search)
             solves.append(self._solve(start, kernel, options, named_stages(callback, stage)))
             return solves[-1][0]
 
