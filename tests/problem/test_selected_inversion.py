@@ -68,17 +68,21 @@ def test_selected_inversion_runs_blas_on_one_thread(monkeypatch):
     inner = selected_inversion._selected_inverse
 
     def recording(factor, columns):
-        blas = threadpoolctl.threadpool_info()
-        seen.append([pool["num_threads"] for pool in blas if pool["user_api"] == "blas"])
+        seen.append(_blas_threads())
         return inner(factor, columns)
 
     monkeypatch.setattr(selected_inversion, "_selected_inverse", recording)
-    before = [p["num_threads"] for p in threadpoolctl.threadpool_info() if p["user_api"] == "blas"]
+    before = _blas_threads()
     matrix = _sparse_spd(30, seed=2)
     _assert_inverse_in_pattern(matrix, _factor(matrix), rtol=1e-10)
     assert seen and all(threads == 1 for threads in seen[0]) and seen[0]
-    after = [p["num_threads"] for p in threadpoolctl.threadpool_info() if p["user_api"] == "blas"]
-    assert after == before
+    assert _blas_threads() == before
+
+
+def _blas_threads() -> list[int]:
+    """The threads of each BLAS library loaded."""
+    pools = threadpoolctl.threadpool_info()
+    return [pool["num_threads"] for pool in pools if pool["user_api"] == "blas"]
 
 
 @pytest.mark.parametrize(
