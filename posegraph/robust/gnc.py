@@ -48,6 +48,7 @@ import numpy as np
 
 from ..graph import PoseGraph
 from ..init.choice import initialize
+from ..init.chordal import Patterns
 from ..problem.factors import between_squares
 from ..problem.linear import NormalEquations
 from ..solvers import (
@@ -105,7 +106,7 @@ def _stages(graph, mask, width_sq, options, start: Result, run: Run):
     if not over.any():
         return result, weights
     mu = np.min(width_sq[over] / (2.0 * s[over] - width_sq[over]))
-    active, system = None, None
+    active, system, patterns = None, None, Patterns()
     while rounds < MAX_ROUNDS:
         rounds += 1
         run.rounds += 1
@@ -115,7 +116,7 @@ def _stages(graph, mask, width_sq, options, start: Result, run: Run):
         if active is None or not np.array_equal(now_active, active):
             active = now_active
             system = NormalEquations(work, work.gauge_nodes(), options.linear_solver)
-        work.set_values(initialize(work, "chordal"), check=False)
+        work.set_values(initialize(work, "chordal", patterns), check=False)
         label = f"gnc round {rounds} (chordal)"
         result = run.solve(work, stage_options, label, system=system)
         s = between_squares(result.values, graph.edges)

@@ -113,7 +113,7 @@ def test_gnc_settles_from_its_values_too_where_chordal_lands_in_a_worse_basin(mo
     city, _ = manhattan_world(num_poses=100, seed=2)
     rng = np.random.default_rng(0)
 
-    def random_headings(graph, method):
+    def random_headings(graph, method, patterns=None):
         count = graph.num_nodes
         turns = np.column_stack([np.zeros((count, 2)), rng.uniform(-np.pi, np.pi, count)])
         return graph.values.retract(turns)
