@@ -155,23 +155,24 @@ def estimate(
 def _with_left_out(
     graph, work, values, edge_inliers, prior_inliers, solved=None
 ) -> MeasurementTests:
-    """The tests of ``work`` (the inliers), then those of the edges and priors left out."""
-    tests = measurement_tests(work, values, solved)
+    """The tests of ``work`` (the inliers), then those of the edges and priors left out, with
+    the leverages that ``solved`` carries where they are ``work``'s at ``values``."""
+    lent = Leverage.lent_by(solved, work, values)
+    tests = measurement_tests(work, values, solved, lent)
     out_edges = graph.edges.subset(~edge_inliers)
     out_priors = graph.priors.subset(~prior_inliers)
     if not len(out_edges) and not len(out_priors):
         return tests
     innovation = np.zeros(0)
     if len(out_edges):
-        innovation = Leverage(work, values).innovations(out_edges)
+        innovation = (lent or Leverage(work, values)).innovations(out_edges)
     prior_s = prior_squares(values, out_priors)
     ranks = np.concatenate(
         [information_ranks(out_edges.information), information_ranks(out_priors.information)]
     )
-    kinds = measurement_kinds(graph)
     left_out = np.concatenate([~edge_inliers, ~prior_inliers])
     parts = (
-        kinds[left_out],
+        measurement_kinds(graph)[left_out],
         np.concatenate([between_squares(values, out_edges), prior_s]),
         ranks.astype(float),
         np.concatenate([innovation, prior_s]),

@@ -170,12 +170,10 @@ def gnc_tls(
             result = run.solve(graph, options, "least squares")
             kept = ~mask | (between_squares(result.values, graph.edges) <= width_sq)
         elif kept is None:
-            kept, searched, from_start = _search(
+            kept, searched, from_start, leverage = _search(
                 graph, mask, width_sq, search_options, run, start, graduate, search
             )
-            work = graph.with_edges(kept)
-            work.set_values(searched.values, check=False)
-            result = run.solve(work, options, "final")
+            result = _final(graph.with_edges(kept), searched, leverage, options, run)
         else:
             result = run.solve(graph.with_edges(kept), options, "carried decisions")
     except Stopped as stopped:
@@ -188,19 +186,29 @@ def gnc_tls(
     )
 
 
+def _final(work: PoseGraph, searched: Result, leverage, options, run: Run) -> Result:
+    """GNC's step 5: least squares over the kept edges (``work``) from the search's solution,
+    carrying the search's ``leverage`` where the solution stayed where it computed them."""
+    work.set_values(searched.values, check=False)
+    result = run.solve(work, options, "final")
+    if leverage is not None and leverage.serves(work, result.values):
+        result = dataclasses.replace(result, leverage=leverage)
+    return result
+
+
 def _search(
     graph, mask, width_sq, options, run: Run, start=None, graduate: bool = True, search=True
 ):
     """GNC's steps 1–4 (module docstring); returns (kept edges, the final solve, whether it
-    began at ``start``). ``start``, the kept edges of an earlier run extended by what was
-    appended since, replaces steps 1–3 where least squares over it settles as it is, and
+    began at ``start``, the local search's leverages at its solution or None). ``start``, the
+    kept edges of an earlier run extended by what was appended since, replaces steps 1–3 where least squares over it settles as it is, and
     competes with them where it settles only after a change (``_settle_decisions``); without
     ``graduate``, it is settled as step 3 settles GNC's decisions, and steps 1–3 never run.
     Without ``search``, steps 3–4 do not run after steps 1–2."""
     if start is not None and not graduate:
         settled = settle_best(graph, mask, start, graph.values, width_sq, options, run)
-        kept, result = local_search(graph, mask, *settled, width_sq, options, run)
-        return kept, result, True
+        kept, result, leverage = local_search(graph, mask, *settled, width_sq, options, run)
+        return kept, result, True, leverage
     settled, as_given = (
         (None, False)
         if start is None
@@ -212,9 +220,9 @@ def _search(
         if settled is None or graduated[2] <= settled[2]:
             settled, from_start = graduated, False
     if not search:
-        return settled[0], settled[1], from_start
-    kept, result = local_search(graph, mask, *settled, width_sq, options, run)
-    return kept, result, from_start
+        return settled[0], settled[1], from_start, None
+    kept, result, leverage = local_search(graph, mask, *settled, width_sq, options, run)
+    return kept, result, from_start, leverage
 
 
 def _graduated(

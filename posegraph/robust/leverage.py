@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from typing import Protocol
 
 import numpy as np
 
@@ -51,7 +52,16 @@ from ..problem.covariance import joint_covariances
 from ..problem.factors import Linearization, information_root, linearize_between, linearize_priors
 from ..problem.information import factorize_information, factorized_information
 from ..problem.linear import NormalEquations
-from ..solvers import Result
+from ..problem.linearization import Linearized
+
+
+class Solved(Protocol):
+    """What a least-squares solve lends at its solution (``solvers.Result``): its normal
+    equations and its linearisation there."""
+
+    system: NormalEquations | None
+    linearization: Linearized | None
+
 
 PROBES = 256
 """Probes of the estimates, and the widest solve for exact innovations. At 32 a leverage of 0.7
@@ -155,7 +165,7 @@ def _factorize(
     values: LieGroup,
     linear_solver: str,
     covariance_of: np.ndarray | None = None,
-    solved: Result | None = None,
+    solved: Solved | None = None,
 ) -> _Factored:
     """H factorised at ``values``. ``solved``, a least-squares solve of this graph ending at
     ``values``, lends its pattern (where ``covariance_of`` lies within it: the groups are
@@ -221,10 +231,20 @@ class DeletedResiduals:
     the information states the noise right (0 for an edge that nothing else measures)."""
 
 
+_MEASUREMENT_PARTS = (
+    lambda edges: edges.i,
+    lambda edges: edges.j,
+    lambda edges: edges.information,
+    lambda edges: edges.measurements.as_matrix(),
+)
+"""What makes measurements the same ones (``Leverage.serves``, ``Leverage.innovations``)."""
+
+
 class Leverage:
     """Deleted residuals and innovations at one least-squares solution ``values`` of
     ``graph``, exact or from K Rademacher probes (module docstring): H is factorised, and the
-    probes solved for, once, on first use, and shared by every call."""
+    probes solved for, once, on first use, and shared by every call. ``solved``, the solve that
+    ended at ``values``, lends its normal equations (``_factorize``)."""
 
     def __init__(
         self,
@@ -233,14 +253,33 @@ class Leverage:
         probes: int = PROBES,
         seed: int = 0,
         linear_solver: str = "auto",
+        solved: Solved | None = None,
     ) -> None:
-        self.graph, self.values = graph, values
+        self.graph, self.values, self.solved = graph, values, solved
         self.probes, self.seed, self.linear_solver = probes, seed, linear_solver
+        self._innovations: dict[bytes, np.ndarray] = {}
+
+    @staticmethod
+    def lent_by(solved: object, graph: PoseGraph, values: LieGroup) -> Leverage | None:
+        """The leverages that a solve carries (``Result.leverage``), where they serve ``graph``
+        at ``values``; else None."""
+        lent = getattr(solved, "leverage", None)
+        return lent if lent is not None and lent.serves(graph, values) else None
+
+    def serves(self, graph: PoseGraph, values: LieGroup) -> bool:
+        """Whether these are the leverages of ``graph``'s measurements at ``values``: the same
+        edges, priors and information, and the same values."""
+        mine, theirs = (self.graph.edges, self.graph.priors), (graph.edges, graph.priors)
+        return np.array_equal(self.values.as_matrix(), values.as_matrix()) and all(
+            np.array_equal(part(a), part(b))
+            for a, b in zip(mine, theirs, strict=True)
+            for part in _MEASUREMENT_PARTS
+        )
 
     @functools.cached_property
     def _factored(self) -> _Factored:
         """H factorised at the values, shared by the probes and the exact innovations."""
-        return _factorize(self.graph, self.values, self.linear_solver)
+        return _factorize(self.graph, self.values, self.linear_solver, solved=self.solved)
 
     @functools.cached_property
     def _probed(self) -> tuple[_Factored, np.ndarray, np.ndarray]:
@@ -253,7 +292,9 @@ class Leverage:
         selectively (CHOLMOD), else estimated from the probes (module docstring); computed on
         first use."""
         if inverts_selectively(self.linear_solver):
-            return deleted_residuals(self.graph, self.values, linear_solver=self.linear_solver)
+            return deleted_residuals(
+                self.graph, self.values, linear_solver=self.linear_solver, solved=self.solved
+            )
         factored, z, w = self._probed
         i, j = self.graph.edges.i, self.graph.edges.j
         hat_z = _rows_times(factored.rows, i, j, w)  # (m, d, K): (A w)ₑ
@@ -264,7 +305,16 @@ class Leverage:
         """Innovation χ² of each edge of ``candidates`` (edges over the graph's nodes that it
         does not hold) against the solution: exact while their d columns in all are no more
         than the probes (a solve as wide as the probes'), or with CHOLMOD no more than
-        ``SELECTED_COLUMNS`` (selected inversion), else estimated from the probes."""
+        ``SELECTED_COLUMNS`` (selected inversion), else estimated from the probes. Kept for
+        the next call with the same candidates."""
+        key = b"".join(
+            np.ascontiguousarray(part(candidates)).tobytes() for part in _MEASUREMENT_PARTS
+        )
+        if key not in self._innovations:
+            self._innovations[key] = self._computed_innovations(candidates)
+        return self._innovations[key].copy()
+
+    def _computed_innovations(self, candidates: EdgeSet) -> np.ndarray:
         whitened, rows = _whitened(
             linearize_between(self.values, candidates), candidates.information
         )
@@ -317,7 +367,7 @@ def deleted_residuals(
     values: LieGroup,
     edges: np.ndarray | None = None,
     linear_solver: str = "auto",
-    solved: Result | None = None,
+    solved: Solved | None = None,
 ) -> DeletedResiduals:
     """Exact deleted residuals at ``values`` (see the module docstring) of the between edges
     indexed by ``edges``, by default all; ``solved``, the least-squares solve that ended at

@@ -28,7 +28,8 @@ little even if it is false (``docs/architecture.md``)."""
 
 
 def local_search(graph, mask, kept, result, objective, width_sq, options, run: Run):
-    """GNC's step 4 from the kept edges and their solve; returns (kept edges, their solve)."""
+    """GNC's step 4 from the kept edges and their solve; returns (kept edges, their solve, the
+    leverages at its solution)."""
     leverage = _leverage(graph, kept, result, options)
     for _ in range(LOCAL_SEARCH_ROUNDS):
         changed = False
@@ -41,20 +42,22 @@ def local_search(graph, mask, kept, result, objective, width_sq, options, run: R
                 # The kept edges' information cannot be factorised even with a ridge (weights
                 # of a range beyond double precision): no deleted residual or innovation can
                 # be computed, and the search ends at the best solution so far.
-                return kept, result
+                return kept, result, None
             if trial is not None and trial_objective < objective:
                 kept, result, objective, changed = trial_kept, trial, trial_objective, True
                 leverage = _leverage(graph, kept, result, options)
         if not changed:
             break
-    return kept, result
+    return kept, result, leverage
 
 
 def _leverage(graph, kept, result, options) -> Leverage:
     """The deleted residuals and innovations at the solution ``result`` over the kept edges
     (computed on first use, then shared by re-admission and dropping while the solution
     stands)."""
-    return Leverage(graph.with_edges(kept), result.values, linear_solver=options.linear_solver)
+    return Leverage(
+        graph.with_edges(kept), result.values, linear_solver=options.linear_solver, solved=result
+    )
 
 
 def _readmit(graph, mask, kept, result, objective, width_sq, options, leverage, run: Run):

@@ -13,10 +13,11 @@ import numpy as np
 from ..graph import PoseGraph, odometry_mask
 from ..graph.checks import information_ranks
 from ..lie import LieGroup
+from ..problem.backends import inverts_selectively
 from ..problem.factors import between_squares, prior_squares
 from ..solvers import Result
 from .kernels import default_width
-from .leverage import deleted_residuals
+from .leverage import Leverage, deleted_residuals
 
 QUANTILE = 0.999
 """The quantile of χ²_rank beyond which a measurement fails the test."""
@@ -125,16 +126,24 @@ class MeasurementTests:
 
 
 def measurement_tests(
-    graph: PoseGraph, values: LieGroup, solved: Result | None = None
+    graph: PoseGraph,
+    values: LieGroup,
+    solved: Result | None = None,
+    leverage: Leverage | None = None,
 ) -> MeasurementTests:
     """The tests of the graph's measurements at ``values``, a least-squares solution (that of
-    ``solved``, if given: its normal equations are reused, ``leverage.deleted_residuals``)."""
+    ``solved``, if given: its normal equations are reused, ``leverage.deleted_residuals``).
+    ``leverage``, of this graph at ``values``, lends its deleted residuals where they are
+    exact (CHOLMOD's)."""
     edge_ranks = information_ranks(graph.edges.information)
     prior_ranks = information_ranks(graph.priors.information)
     prior_s = prior_squares(values, graph.priors)
     edge_s, redundancy, innovation = np.zeros(0), np.zeros(0), np.zeros(0)
     if graph.num_edges:
-        deleted = deleted_residuals(graph, values, solved=solved)
+        exact = leverage is not None and inverts_selectively(leverage.linear_solver)
+        deleted = (
+            leverage.deleted_residuals if exact else deleted_residuals(graph, values, solved=solved)
+        )
         unmeasured = graph.group.dof - edge_ranks  # directions I − Mₑₑ counts as 1 that s lacks
         edge_s = between_squares(values, graph.edges)
         redundancy = np.maximum(deleted.redundancy - unmeasured, 0.0)

@@ -11,6 +11,7 @@ from ..lie import LieGroup
 if TYPE_CHECKING:
     from ..problem.linear import NormalEquations
     from ..problem.linearization import Linearized
+    from ..robust.leverage import Leverage
 
 PHASES = ("linearize", "assemble", "factorize", "solve", "other")
 """The phases that ``Summary.phase_times`` times."""
@@ -128,6 +129,9 @@ class Result:
     """The ``NormalEquations`` used (pattern and symbolic factorisation), for reuse."""
     linearization: Linearized | None = dataclasses.field(default=None, repr=False, compare=False)
     """The residuals and Jacobians at ``values``, for reuse by a warm start."""
+    leverage: Leverage | None = dataclasses.field(default=None, repr=False, compare=False)
+    """The deleted residuals and innovations at ``values`` over the kept measurements, where
+    GNC's local search computed them there, for reuse by the noise check."""
 
     def __getstate__(self) -> dict:
         """Pickled and deep-copied without ``system`` (its factorisation holds CHOLMOD handles

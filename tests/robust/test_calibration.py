@@ -13,7 +13,9 @@ from posegraph_datasets.outliers import add_false_loops, rejection_rates
 
 import posegraph
 from posegraph.graph import odometry_mask
-from posegraph.robust import calibration
+from posegraph.robust import calibration, noise
+from posegraph.robust.gnc import gnc_tls
+from posegraph.robust.kernels import default_width
 
 
 @pytest.fixture(scope="module")
@@ -168,3 +170,44 @@ def test_calibration_ends_where_a_widening_brings_gross_outliers_back(monkeypatc
     assert len(solved) == 2 and result is solved[-1]
     assert found.scales == dict.fromkeys(["odometry", "loop closures"], pytest.approx(10.0))
     assert found.solves == 2
+
+
+def test_the_noise_check_borrows_the_local_searchs_leverages_and_agrees_with_its_own(
+    monkeypatch,
+):
+    """GNC's result carries the leverages its local search computed at its solution over the
+    kept edges; the noise check of that result tests every measurement (kept ones by their
+    deleted residuals, rejected ones by their innovations) as it does with leverages of its
+    own, without computing deleted residuals again."""
+    graph, _ = manhattan_world(400, seed=5)
+    corrupted, _ = add_false_loops(graph, 0.1, seed=1)
+    mask = ~odometry_mask(corrupted)
+    outcome = gnc_tls(corrupted, mask, default_width(3, 0.999))
+    result = outcome.result
+    assert result.leverage is not None
+    edge_inliers = np.ones(corrupted.num_edges, dtype=bool)
+    edge_inliers[outcome.rejected] = False
+    prior_inliers = np.ones(len(corrupted.priors), dtype=bool)
+    own = calibration._with_left_out(
+        corrupted,
+        calibration._inliers(corrupted, edge_inliers, prior_inliers),
+        result.values,
+        edge_inliers,
+        prior_inliers,
+        dataclasses.replace(result, leverage=None),
+    )
+    computed = []
+    monkeypatch.setattr(noise, "deleted_residuals", lambda *a, **k: computed.append(a))
+    lent = calibration._with_left_out(
+        corrupted,
+        calibration._inliers(corrupted, edge_inliers, prior_inliers),
+        result.values,
+        edge_inliers,
+        prior_inliers,
+        result,
+    )
+    assert computed == []
+    for field in dataclasses.fields(own):
+        np.testing.assert_allclose(
+            getattr(lent, field.name), getattr(own, field.name), rtol=1e-9, atol=1e-12
+        )

@@ -238,3 +238,48 @@ def test_no_candidates_have_no_innovations(backend):
     none = graph.edges.subset(np.array([], dtype=np.int64))
     assert leverage.innovations(none).shape == (0,)
     assert leverage.sequential_innovations(none).shape == (0,)
+
+
+def test_innovations_of_the_same_candidates_are_computed_once(backend, monkeypatch):
+    """A second call with equal candidates (another EdgeSet of the same edges) returns the
+    first call's innovations without computing them again; other candidates, or the same
+    edges with other information, are computed."""
+    graph = GRAPHS["SE2"]()
+    solution = solve(graph, SolverOptions(linear_solver=backend))
+    loops = _loops(graph)
+    keep = np.ones(graph.num_edges, dtype=bool)
+    keep[loops] = False
+    without = graph.with_edges(keep)
+    leverage = Leverage(without, solution.values, linear_solver=backend)
+    computed = []
+    original = Leverage._computed_innovations
+    monkeypatch.setattr(
+        Leverage,
+        "_computed_innovations",
+        lambda self, candidates: computed.append(len(candidates)) or original(self, candidates),
+    )
+    first = leverage.innovations(graph.edges.subset(loops))
+    again = leverage.innovations(graph.edges.subset(loops.copy()))
+    np.testing.assert_array_equal(first, again)
+    assert computed == [loops.size]
+    leverage.innovations(graph.edges.subset(loops[:3]))
+    heavier = graph.edges.subset(loops)
+    heavier = dataclasses.replace(heavier, information=2.0 * heavier.information)
+    assert np.all(leverage.innovations(heavier) > first)
+    assert computed == [loops.size, 3, loops.size]
+
+
+def test_leverage_serves_only_its_own_measurements_at_its_own_values(backend):
+    """``serves`` holds for a copy of the graph at equal values, and fails for moved values,
+    one edge left out, or one edge's information scaled."""
+    graph = GRAPHS["SE3-priors"]()
+    solution = solve(graph, SolverOptions(linear_solver=backend))
+    leverage = Leverage(graph, solution.values, linear_solver=backend)
+    assert leverage.serves(graph.copy(), solution.values[np.arange(graph.num_nodes)])
+    assert not leverage.serves(graph, solution.values.retract(np.full((graph.num_nodes, 6), 1e-9)))
+    keep = np.ones(graph.num_edges, dtype=bool)
+    keep[-1] = False
+    assert not leverage.serves(graph.with_edges(keep), solution.values)
+    weights = np.ones(graph.num_edges)
+    weights[0] = 1.5
+    assert not leverage.serves(graph.weighted(weights), solution.values)
