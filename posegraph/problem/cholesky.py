@@ -98,6 +98,16 @@ class NotPositiveDefinite(ArithmeticError):
     """The matrix could not be factorised (not positive definite, or singular)."""
 
 
+def dense_inverse_form(
+    solve, size: int, rows: np.ndarray, columns: np.ndarray, values: np.ndarray, count: int
+) -> np.ndarray:
+    """Bᵀ A⁻¹ B, (count, count), for the B (size, count) of the entries given (repeated ones
+    add up), by one ``solve`` (A⁻¹ of columns) of B's dense columns."""
+    b = np.zeros((size, count))
+    np.add.at(b, (rows, columns), values)
+    return b.T @ solve(b)
+
+
 class CholmodCholesky:
     """CHOLMOD (cvxopt) with the symbolic factorisation computed once for the pattern."""
 
@@ -216,19 +226,34 @@ class CholmodCholesky:
             return self._selected_blocks(groups)
         return self._solved_blocks(groups)
 
-    def _solved_blocks(self, groups: np.ndarray) -> np.ndarray:
-        """Each block as Yᵀ D⁻¹ Y with Y = L⁻¹ P E_g (P A Pᵀ = L D Lᵀ, D = I for a supernodal
-        factor): sparse solves with the unit columns, for a factor of either kind."""
+    def inverse_form(
+        self, rows: np.ndarray, columns: np.ndarray, values: np.ndarray, count: int
+    ) -> np.ndarray:
+        """Bᵀ A⁻¹ B, (count, count), for the sparse B (size, count) of the entries given (rows,
+        columns, values; repeated ones add up): sparse solves, whose cost follows the paths of
+        B's rows in the elimination tree, not the factor's size (``_half_solved``)."""
+        b = self._spmatrix(values.tolist(), rows.tolist(), columns.tolist(), (self.size, count))
+        y, scaled = self._half_solved(b)
+        return (y.T @ scaled).toarray()
+
+    def _half_solved(self, b) -> tuple:
+        """Y = L⁻¹ P B and D⁻¹ Y (P A Pᵀ = L D Lᵀ, D = I for a supernodal factor), as scipy
+        CSC matrices, by sparse solves with the cvxopt sparse matrix B: Bᵀ A⁻¹ B = Yᵀ D⁻¹ Y."""
         import scipy.sparse  # on use: a solve with CHOLMOD does without scipy
 
+        y = self._cholmod.spsolve(self._factor, b, sys=7)  # P
+        y = self._cholmod.spsolve(self._factor, y, sys=4)  # L⁻¹
+        scaled = self._cholmod.spsolve(self._factor, y, sys=6)  # D⁻¹
+        return tuple(scipy.sparse.csc_matrix(self._compressed(m), m.size) for m in (y, scaled))
+
+    def _solved_blocks(self, groups: np.ndarray) -> np.ndarray:
+        """Each block as Yᵀ D⁻¹ Y with Y = L⁻¹ P E_g (``_half_solved`` of the unit columns),
+        for a factor of either kind."""
         columns = groups.ravel()
         unit = self._spmatrix(
             1.0, columns.tolist(), list(range(columns.size)), (self.size, columns.size)
         )
-        y = self._cholmod.spsolve(self._factor, unit, sys=7)  # P
-        y = self._cholmod.spsolve(self._factor, y, sys=4)  # L⁻¹
-        scaled = self._cholmod.spsolve(self._factor, y, sys=6)  # D⁻¹
-        y, scaled = (scipy.sparse.csc_matrix(self._compressed(m), m.size) for m in (y, scaled))
+        y, scaled = self._half_solved(unit)
         width = groups.shape[1]
         parts = [slice(g * width, (g + 1) * width) for g in range(len(groups))]
         return np.array([(y[:, part].T @ scaled[:, part]).toarray() for part in parts])
@@ -334,6 +359,13 @@ class ScipyCholesky:
         pivots = np.empty(self._size)
         pivots[self._order] = self._lu.U.diagonal()
         return pivots
+
+    def inverse_form(
+        self, rows: np.ndarray, columns: np.ndarray, values: np.ndarray, count: int
+    ) -> np.ndarray:
+        """Bᵀ A⁻¹ B, (count, count), for the B (size, count) of the entries given (repeated
+        ones add up), by one solve of its columns."""
+        return dense_inverse_form(self.solve, self._size, rows, columns, values, count)
 
     def covariance_blocks(self, groups: np.ndarray) -> np.ndarray:
         """Blocks (A⁻¹)[g, g], (G, c, c), by solving for the unit columns of each group."""

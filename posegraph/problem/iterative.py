@@ -67,6 +67,13 @@ class ConjugateGradients:
             return self._factor().solve(rhs)
         return solution.reshape(rhs.shape)
 
+    def inverse_form(
+        self, rows: np.ndarray, columns: np.ndarray, values: np.ndarray, count: int
+    ) -> np.ndarray:
+        """Bᵀ A⁻¹ B for the sparse B of the entries given, by the direct factoriser (as for
+        several columns: ``solve``)."""
+        return self._factor().inverse_form(rows, columns, values, count)
+
     def _iterate(self, b: np.ndarray) -> np.ndarray | None:
         """The preconditioned conjugate-gradient solution of A x = b, or None where it does not
         converge (or the diagonal is not positive: A is not positive definite)."""

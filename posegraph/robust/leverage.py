@@ -91,22 +91,27 @@ class _Factored:
         return self.system.scatter(self.system.solve(rhs))
 
     def cross_terms(self, i: np.ndarray, j: np.ndarray, rows: np.ndarray) -> np.ndarray:
-        """A H⁻¹ Aᵀ over the stacked rows A (m, d, 2d) of m edges i → j, as (m, d, m·d): one
-        solve of m·d columns."""
-        return _rows_times(rows, i, j, self.solve(self.transposed_rows(i, j, rows)))
+        """A H⁻¹ Aᵀ over the stacked rows A (m, d, 2d) of m edges i → j, as (m, d, m·d), from
+        the factor of H (``inverse_form``: sparse solves with CHOLMOD)."""
+        count, d = len(i), self.system.dof
+        if self.system.size == 0:
+            return np.zeros((count, d, count * d))
+        form = self.system.cholesky.inverse_form(*self.transposed_entries(i, j, rows), count * d)
+        return form.reshape(count, d, count * d)
 
-    def transposed_rows(self, i: np.ndarray, j: np.ndarray, rows: np.ndarray) -> np.ndarray:
-        """Aᵀ of m edges' rows (m, d, 2d) at their nodes i and j, as (size, m·d): column
-        e·d + b is row b of edge e."""
+    def transposed_entries(self, i: np.ndarray, j: np.ndarray, rows: np.ndarray) -> tuple:
+        """Aᵀ of m edges' rows (m, d, 2d) at their nodes i and j, (size, m·d), as its entries
+        (rows, columns, values): column e·d + b is row b of edge e."""
         system, d = self.system, self.system.dof
-        out = np.zeros((system.size, len(i) * d))
         columns = np.arange(len(i) * d).reshape(-1, d, 1)
+        parts = []
         for nodes, part in ((i, rows[..., :d]), (j, rows[..., d:])):
             block = system.block_of[nodes]
             free = block >= 0  # held nodes have no columns in H
             places = (block[free, None] * d + np.arange(d))[:, None, :]
-            np.add.at(out, (places, columns[free]), part[free])
-        return out
+            places, at = np.broadcast_arrays(places, columns[free])
+            parts.append((places.ravel(), at.ravel(), part[free].ravel()))
+        return tuple(np.concatenate(pieces) for pieces in zip(*parts, strict=True))
 
     def rademacher(self, probes: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
         """Rademacher probes z of the between rows (K, m, d) and w = H⁻¹ Aᵀ z, the priors'

@@ -277,3 +277,27 @@ def test_a_pattern_is_rebuilt_when_the_graph_did_not_only_grow():
     assert not NormalEquations(shrunk, held, previous=previous).grown
     assert not NormalEquations(graph, np.array([1]), previous=previous).grown  # other gauge
     assert NormalEquations(graph, held, previous=previous).grown  # nothing appended
+
+
+@pytest.mark.parametrize("backend", [*available_backends(), "cg"])
+def test_inverse_form_of_sparse_columns_equals_the_dense_product(backend):
+    """Bᵀ H⁻¹ B for a sparse B given by its entries (one of them repeated, which adds up)
+    equals the product of dense matrices, for every backend (CHOLMOD's by sparse solves)."""
+    graph = random_graph(POSE_GROUPS[1], 30, 12, seed=7, priors=1)
+    system = NormalEquations(graph, graph.gauge_nodes(), backend)
+    lin = linearize_between(graph.values, graph.edges)
+    prior_lin = linearize_priors(graph.values, graph.priors)
+    data = system.normal_matrix(lin, graph.edges.information, prior_lin, graph.priors.information)
+    system.factorize(data)
+    rng = np.random.default_rng(3)
+    count = 7
+    rows = np.append(rng.integers(0, system.size, 40), 0)
+    columns = np.append(rng.integers(0, count, 40), 0)
+    values = np.append(rng.normal(size=40), 0.5)
+    rows[0], columns[0] = 0, 0  # the entry (0, 0) twice
+    dense_b = np.zeros((system.size, count))
+    np.add.at(dense_b, (rows, columns), values)
+    hessian = _dense_system(graph, graph.gauge_nodes())[0]
+    expected = dense_b.T @ np.linalg.solve(hessian, dense_b)
+    form = system.cholesky.inverse_form(rows, columns, values, count)
+    np.testing.assert_allclose(form, expected, rtol=1e-8, atol=1e-10 * np.abs(expected).max())
