@@ -3,6 +3,6 @@ the normal equations, GNC's decisions), with its warm-start policy."""
 
 from .smoother import Smoother
 from .solution import GncProblem, Solution
-from .warm_start import COMPOSED, RESTART
+from .warm_start import COMPOSED, RESTART, SKIPPED
 
-__all__ = ["COMPOSED", "RESTART", "GncProblem", "Smoother", "Solution"]
+__all__ = ["COMPOSED", "RESTART", "SKIPPED", "GncProblem", "Smoother", "Solution"]

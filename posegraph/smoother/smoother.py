@@ -22,20 +22,7 @@ from ..solvers.summary import in_turn_summary, named_stages
 from . import warm_start
 from .fixed_lag import FixedLag
 from .solution import GncProblem, Solution
-
-
-@dataclasses.dataclass(frozen=True)
-class _Start:
-    """How a call starts: the initialisation's name, what it reused, whether the solution
-    extends to the grown graph (nothing to solve), and GNC's carried decisions."""
-
-    init: str
-    reused: tuple[str, ...] = ()
-    composed: bool = False
-    standing: np.ndarray | None = None
-    decisions: np.ndarray | None = None
-    graduate: bool = True
-    search: bool = True
+from .warm_start import Start
 
 
 class Smoother:
@@ -108,7 +95,9 @@ class Smoother:
         keep their values, nodes added since are composed and refined alone; in least squares
         it restarts from chordal relaxation where the new measurements disagree with the
         solution (``warm_start.RESTART``), and solves nothing where all that was added hangs off
-        a converged solution by a tree of edges (``warm_start.COMPOSED``). A GNC call carries
+        a converged solution by a tree of edges (``warm_start.COMPOSED``), or, with
+        ``options.skip_within``, where it could lower the optimum by at most that share of the
+        cost (``warm_start.SKIPPED``; a later call solves). A GNC call carries
         the last run's decisions where the graph has only grown (``warm_start.previous_decisions``).
         ``summary.reused`` says what was reused."""
         options = options or SolverOptions()
@@ -135,6 +124,12 @@ class Smoother:
             total_time=time.perf_counter() - began,
         )
         result = dataclasses.replace(result, summary=summary)
+        self._keep(result, weights, kernel, options, start)
+        return result
+
+    def _keep(self, result: Result, weights, kernel, options: SolverOptions, start: Start) -> None:
+        """Leave ``result``'s values in the graph and keep its ``Solution`` for the next call."""
+        summary = result.summary
         final = (
             kernel is not None
             and kernel.spec.gnc
@@ -143,10 +138,17 @@ class Smoother:
         graph = self.graph
         graph.set_values(result.values, check=False)
         gnc = GncProblem(kernel.spec, kernel.measured) if final else None
+        debt = 0.0 if start.debt is None else start.debt
         self.solution = Solution(
-            graph.edges, graph.priors, *weights, graph.fixed.copy(), result.values, summary, gnc
+            graph.edges,
+            graph.priors,
+            *weights,
+            graph.fixed.copy(),
+            result.values,
+            summary,
+            gnc,
+            debt,
         )
-        return result
 
     def _optimize_window(
         self, init: str, options: SolverOptions, spec: RobustSpec | None, calibrate_noise
@@ -163,56 +165,27 @@ class Smoother:
         )
         return result
 
-    def _start(self, init: str, kernel: Kernel | None, options: SolverOptions) -> _Start:
+    def _start(self, init: str, kernel: Kernel | None, options: SolverOptions) -> Start:
         """The graph's starting values, set by ``init`` (a warm start where the smoother solved
         before and ``init`` is "auto")."""
         graph, solution = self.graph, self.solution
         if init == "auto" and solution is not None:
-            return self._warm_start(kernel, options)
+            return warm_start.warm_started(self.graph, solution, kernel, options)
         if init == "file":
             graph.require_values("add them with values or use init='auto'")
         else:
             if init == "auto":
                 init = "odometry" if kernel is not None else choose(graph)
             graph.set_values(initialize(graph, init), check=False)
-        return _Start(init)
-
-    def _warm_start(self, kernel: Kernel | None, options: SolverOptions) -> _Start:
-        graph, solution = self.graph, self.solution
-        solved = int(graph.initialized.sum())
-        decisions = standing = None
-        if kernel is not None and kernel.spec.gnc:
-            decisions = warm_start.previous_decisions(graph, solution, kernel)
-        if decisions is not None and warm_start.standing_decisions(
-            graph, solution, kernel.measured
-        ):
-            standing = decisions
-        if kernel is not None:
-            same_problem = standing is not None
-        else:
-            same_problem = solution.summary.robust is None
-        composed = same_problem and warm_start.solution_extends(graph, solution)
-        if composed:
-            solved = len(solution.fixed)
-            warm_start.compose_new_nodes(graph, np.arange(graph.num_nodes) >= solved)
-            init = "warm start"
-        else:
-            init = warm_start.warm_start(graph, solution, options, least_squares=kernel is None)
-        reused = (f"previous solution ({solved} nodes)",) if init == "warm start" else ()
-        if standing is not None:
-            reused += (
-                f"GNC's decisions ({np.count_nonzero(~standing)} rejected; nothing added since"
-                " is under the kernel)",
-            )
-        return _Start(init, reused, composed, standing, decisions)
+        return Start(init)
 
     def _solve(
-        self, start: _Start, kernel: Kernel | None, options: SolverOptions, callback
+        self, start: Start, kernel: Kernel | None, options: SolverOptions, callback
     ) -> tuple[Result, np.ndarray, np.ndarray]:
         """The solve from the start values: (result, edge weights, prior weights)."""
         graph = self.graph
-        if start.composed:
-            result = warm_start.composed_result(graph, self.solution, options)
+        if start.debt is not None:
+            result = warm_start.composed_result(graph, self.solution, options, start.debt)
             edge_weights, prior_weights = self.solution.weights_for(graph.edges, graph.priors)
             if kernel is not None:  # GNC's decisions stand
                 rejected = np.flatnonzero(~start.standing)
@@ -250,7 +223,7 @@ class Smoother:
             if kernel is not None and kernel.spec.gnc and not graduate:
                 weights = next(solve[1:] for solve in solves if solve[0] is after)
                 decisions = np.concatenate(weights)[: len(kernel.measured)] > 0
-            start = _Start("calibration", decisions=decisions, graduate=graduate, search=search)
+            start = Start("calibration", decisions=decisions, graduate=graduate, search=search)
             solves.append(self._solve(start, kernel, options, named_stages(callback, stage)))
             return solves[-1][0]
 

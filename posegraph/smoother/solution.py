@@ -42,9 +42,12 @@ class Solution:
     """The robust problem whose graduated non-convexity ran to its end here; None in least
     squares, with an IRLS kernel, or where the run stopped early. A later call may carry its
     decisions (``warm_start.previous_decisions``)."""
-    optimal: bool = True
-    """Whether ``values`` are the optimum over ``edges`` and ``priors``: False once a removal
-    left what remains of it (``without``), so that a later call solves again."""
+    debt: float | None = 0.0
+    """Where the last solve converged (``summary.converged``), how much the cost at ``values``
+    may exceed the optimum's over ``edges`` and ``priors``: 0 after the solve, the cost of the
+    measurements added since after calls that skipped their solve (``warm_start.skipped_debt``).
+    None once a removal left what remains of it (``without``), so that a later call solves
+    again."""
 
     @classmethod
     def least_squares(
@@ -78,7 +81,7 @@ class Solution:
             self.values[~nodes],
             summary,
             gnc,
-            optimal=False,
+            debt=None,
         )
 
     def weights_for(self, edges: EdgeSet, priors: EdgeSet) -> tuple[np.ndarray, np.ndarray]:

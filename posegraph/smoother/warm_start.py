@@ -1,5 +1,6 @@
 """The warm-start policy of a ``Smoother``: start from the last solution, compose what was added,
-restart where the new measurements disagree, skip the solve where the solution extends, and
+restart where the new measurements disagree, skip the solve where the solution extends or
+where what was added could lower the optimum by little (``SolverOptions.skip_within``), and
 carry GNC's decisions where the graph has only grown."""
 
 from __future__ import annotations
@@ -8,7 +9,7 @@ import dataclasses
 
 import numpy as np
 
-from ..graph import PoseGraph, connected_components, information_ranks, measured_dof
+from ..graph import EdgeSet, PoseGraph, connected_components, information_ranks, measured_dof
 from ..init.choice import choose, initialize
 from ..init.spanning_tree import align_to_priors, spanning_tree_values
 from ..problem.backends import resolve_backend
@@ -30,6 +31,56 @@ COMPOSED = (
 """The termination of a warm start that ``solution_extends``: no iterations were needed."""
 RESTART = "chordal (restart: the new measurements disagree with the previous solution)"
 """The initialisation of a warm start that failed ``_agree_with_solution``."""
+SKIPPED = "skipped: the measurements added since the last solve lower the optimum by little"
+"""The termination of a call that ``skipped_debt`` let skip its solve."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Start:
+    """How a call starts: the initialisation's name, what it reused, GNC's carried decisions,
+    and, where the call solves nothing, how much the start's cost may exceed the optimum's
+    (``Solution.debt``): the solution's, where it extends to the grown graph, or more, where
+    the call skips its solve (``skipped_debt``)."""
+
+    init: str
+    reused: tuple[str, ...] = ()
+    standing: np.ndarray | None = None
+    decisions: np.ndarray | None = None
+    graduate: bool = True
+    search: bool = True
+    debt: float | None = None
+
+
+def warm_started(
+    graph: PoseGraph, solution: Solution, kernel: Kernel | None, options: SolverOptions
+) -> Start:
+    """The start of a call on a smoother that solved before: the graph's values from its last
+    ``solution`` (``warm_start``, or composed where it extends), GNC's carried decisions, and
+    whether the call may solve nothing (``Start.debt``)."""
+    solved = int(graph.initialized.sum())
+    decisions = standing = None
+    if kernel is not None and kernel.spec.gnc:
+        decisions = previous_decisions(graph, solution, kernel)
+    if decisions is not None and standing_decisions(graph, solution, kernel.measured):
+        standing = decisions
+    same_problem = standing is not None if kernel else solution.summary.robust is None
+    debt = None
+    if same_problem and solution_extends(graph, solution):
+        solved = len(solution.fixed)
+        compose_new_nodes(graph, np.arange(graph.num_nodes) >= solved)
+        init = "warm start"
+        debt = affordable(solution.debt, solution.summary.final_error, options)
+    else:
+        init = warm_start(graph, solution, options, least_squares=kernel is None)
+        if kernel is None and init == "warm start":
+            debt = skipped_debt(graph, solution, options)
+    reused = (f"previous solution ({solved} nodes)",) if init == "warm start" else ()
+    if standing is not None:
+        reused += (
+            f"GNC's decisions ({np.count_nonzero(~standing)} rejected; nothing added since"
+            " is under the kernel)",
+        )
+    return Start(init, reused, standing, decisions, debt=debt)
 
 
 def warm_start(
@@ -94,13 +145,13 @@ def standing_decisions(graph: PoseGraph, solution: Solution, measured: np.ndarra
 
 def _grew_by_a_tree(graph: PoseGraph, solution: Solution) -> bool:
     """Whether all that was added to the graph since its last solution is a tree of between
-    edges that hangs the new nodes off the solved ones: the solution is an optimum (nothing
-    was removed since: ``Solution.optimal``), its edges and priors come first and unchanged,
+    edges that hangs the new nodes off the solved ones: nothing was removed since
+    (``Solution.debt``), the solution's edges and priors come first and unchanged,
     and no prior, no hold and no cycle is new. Each new node then has one place that fits its
     edges exactly, and the problem over the solved nodes is as it was."""
     old, new_edges = len(solution.fixed), slice(len(solution.edges), None)
     return (
-        solution.optimal
+        solution.debt is not None
         and len(graph.priors) == len(solution.priors)
         and _hangs_a_tree(graph.edges.i[new_edges], graph.edges.j[new_edges], old, graph.num_nodes)
         and np.array_equal(graph.fixed[:old], solution.fixed)
@@ -127,13 +178,56 @@ def solution_extends(graph: PoseGraph, solution: Solution) -> bool:
     )
 
 
-def composed_result(graph: PoseGraph, solution: Solution, options: SolverOptions) -> Result:
-    """The graph's values, an optimum by ``solution_extends``, as a result of no iterations.
-    Its error is the solution's plus that of the new edges (zero, but for rounding), and the
-    free nodes are the solution's and the new ones (the tree adds no component and no hold)."""
+def skipped_debt(graph: PoseGraph, solution: Solution, options: SolverOptions) -> float | None:
+    """How much the cost at the warm start (the solved nodes at their values, the new ones
+    refined) may exceed the grown graph's optimum, where that is at most
+    ``options.skip_within`` of the cost, so that the call may skip its solve; else None.
+
+    Where the solved nodes hold values whose cost exceeds the optimum of the measurements they
+    were solved for by at most the solution's ``debt`` (0 at a converged solve), the grown
+    graph's optimum is at least that optimum (each measurement's cost is ≥ 0), and the cost at
+    the warm start is that cost plus the added measurements' cost c: the excess is at most
+    ``debt`` + c. Only where the graph grew by appended nodes and edges alone (a new prior may
+    free a held node)."""
+    edges, priors, old = solution.edges, solution.priors, len(solution.fixed)
+    if not (
+        options.skip_within > 0
+        and solution.summary.converged
+        and solution.debt is not None
+        and graph.edges.starts_with(edges)
+        and len(graph.priors) == len(priors)
+        and graph.priors.starts_with(priors)
+        and np.array_equal(graph.fixed[:old], solution.fixed)
+        and not graph.fixed[old:].any()
+        and graph.values[:old].same_as(solution.values)
+    ):
+        return None
+    added = 0.5 * float(between_squares(graph.values, _added(graph, solution)).sum())
+    return affordable(solution.debt + added, solution.summary.final_error + added, options)
+
+
+def affordable(debt: float, cost: float, options: SolverOptions) -> float | None:
+    """``debt``, where a call may leave it unsolved: none, or at most ``options.skip_within``
+    of the ``cost``; else None."""
+    return debt if debt == 0 or debt <= options.skip_within * cost else None
+
+
+def _added(graph: PoseGraph, solution: Solution) -> EdgeSet:
+    """The edges appended since the solution."""
+    return graph.edges.subset(slice(len(solution.edges), None))
+
+
+def composed_result(
+    graph: PoseGraph, solution: Solution, options: SolverOptions, debt: float = 0.0
+) -> Result:
+    """The graph's values as a result of no iterations: an optimum by ``solution_extends``, or
+    within ``debt`` of one where the call skipped its solve (``skipped_debt``). Its error is the
+    solution's plus that of the measurements added since (for a tree, zero but for rounding),
+    and the free nodes are the solution's and the new ones (neither adds a hold)."""
     previous = solution.summary
-    new_edges = graph.edges.subset(slice(len(solution.edges), None))
-    error = previous.final_error + 0.5 * float(between_squares(graph.values, new_edges).sum())
+    error = previous.final_error + 0.5 * float(
+        between_squares(graph.values, _added(graph, solution)).sum()
+    )
     new_nodes = graph.num_nodes - len(solution.fixed)
     summary = Summary(
         method=options.method,
@@ -141,7 +235,7 @@ def composed_result(graph: PoseGraph, solution: Solution, options: SolverOptions
         initial_error=error,
         final_error=error,
         iterations=[],
-        termination=COMPOSED,
+        termination=COMPOSED if debt == 0 else f"{SKIPPED} (at most {debt:.3g})",
         converged=True,
         phase_times=dict.fromkeys(PHASES, 0.0),
         total_time=0.0,

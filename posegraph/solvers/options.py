@@ -41,6 +41,9 @@ class SolverOptions:
             ``DEFAULT_INITIAL_DAMPING``, and in GNC's solves ``gnc.INITIAL_DAMPING``.
         min_diagonal, max_diagonal: clamp diag(H) before using it as damping (as Ceres does).
         linear_solver: "auto", "cholmod", "scipy" or "cg" (see ``posegraph.problem.backends``).
+        skip_within: a ``Smoother``'s warm-started least-squares call solves nothing where the
+            measurements added since its last solve could lower the cost by at most this share
+            of it (``smoother.warm_start.skipped_debt``); 0 solves at every call.
     """
 
     method: str = "lm"
@@ -54,6 +57,7 @@ class SolverOptions:
     min_diagonal: float = 1e-6
     max_diagonal: float = 1e32
     linear_solver: str = "auto"
+    skip_within: float = 0.0
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -64,7 +68,7 @@ class SolverOptions:
             raise ValueError("max_iterations must be ≥ 0")
         if self.time_limit is not None and not self.time_limit >= 0:
             raise ValueError(f"time_limit must be ≥ 0 seconds, not {self.time_limit}")
-        for name in ("relative_decrease", "gradient_tolerance", "step_tolerance"):
+        for name in ("relative_decrease", "gradient_tolerance", "step_tolerance", "skip_within"):
             _require_finite_at_least(name, getattr(self, name), 0.0)
         if self.initial_damping is not None:
             _require_finite_at_least("initial_damping", self.initial_damping, 0.0)

@@ -269,6 +269,16 @@ def test_the_isam2_pass_streams_into_isam2_alone_and_compares_with_a_batch_solve
     assert "160 poses streamed in steps of 20 (8 calls)" in report
 
 
+def test_the_isam2_stream_whose_calls_may_skip_ends_at_the_batch_optimum_after_its_last_call():
+    """``--isam2 --skip-within``: posegraph's calls may skip their solve, one call with the
+    defaults follows the stream (one call more), and the last error is the batch solve's."""
+    report = run_against_isam2(example("sphere_small.g2o"), 1, skip_within=0.05)
+    relative = r"\(([-+0-9.e]+) relative to a batch solve's"
+    assert abs(float(re.search(relative, report).group(1))) <= 1e-6
+    assert "160 poses streamed in steps of 1 (161 calls)" in report
+    assert int(re.search(r"(\d+) calls skipped their solve", report).group(1)) > 0
+
+
 def test_gnss_fixes_given_the_poses_rotations_reach_gtsams_position_only_optimum():
     """A GNSS fix is a prior without rotation information, r = Log(Z⁻¹X): its position part
     V(φ)⁻¹ R_Zᵀ (t − t_Z) depends on how far the pose turns from Z's rotation. On a track

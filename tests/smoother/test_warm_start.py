@@ -20,7 +20,8 @@ from posegraph.graph import PoseGraph
 from posegraph.lie import SE2, SE3, Sim3
 from posegraph.problem.linear import NormalEquations
 from posegraph.robust.spec import robust_mask
-from posegraph.smoother import COMPOSED, RESTART
+from posegraph.smoother import COMPOSED, RESTART, SKIPPED
+from posegraph.solvers import SolverOptions
 from tests.smoother.helpers import count_normal_equations, drive_on, searched_from_decisions
 
 from ..conftest import cull, random_graph
@@ -423,3 +424,53 @@ def test_a_stream_with_cholmod_never_imports_scipy():
     nodes, edges = map(int, lines[0].split())
     assert nodes == 60 and edges > nodes - 1  # it closed loops
     assert not {name for name in lines[1].split() if name.split(".")[0] == "scipy"}
+
+
+def test_calls_that_skip_their_solve_stay_within_the_share_asked_of_each_prefix_optimum():
+    """Streamed with ``skip_within`` 5%, many calls skip their solve, and after every call the
+    cost at the smoother's values exceeds the optimum of the graph so far (solved from scratch)
+    by at most 5% of it; a call with the defaults then solves, ending at the batch optimum.
+    With the defaults throughout, no call skips."""
+    full, _ = manhattan_world(num_poses=300, seed=6)
+    lazy = SolverOptions(skip_within=0.05)
+    smoother, skipped = None, 0
+    for graph in stream(full, 1):
+        smoother = smoother or posegraph.Smoother(graph)
+        result = smoother.optimize(options=lazy)
+        skipped += result.summary.termination.startswith(SKIPPED)
+        if graph.num_edges > graph.num_nodes:  # loops: an optimum above zero
+            optimum = posegraph.optimize(graph.copy()).summary.final_error
+            assert result.summary.final_error == pytest.approx(
+                0.5 * posegraph.problem.factors.chi2(graph.values, graph.edges, graph.priors)
+            )
+            assert result.summary.final_error <= 1.05 * optimum * (1 + 1e-9)
+    assert skipped > 50
+    final = smoother.optimize()
+    assert not final.summary.termination.startswith(SKIPPED)
+    batch = posegraph.optimize(full.copy()).summary.final_error
+    assert final.summary.final_error == pytest.approx(batch, rel=1e-6)
+    eager = None
+    for graph in stream(full, 1):
+        eager = eager or posegraph.Smoother(graph)
+        assert not eager.optimize().summary.termination.startswith(SKIPPED)
+
+
+def test_a_removal_makes_the_next_call_solve_even_where_it_may_skip():
+    """After a removal the solution's bound is unknown (``Solution.debt`` None): the next call
+    solves, however large ``skip_within`` is."""
+    full, _ = manhattan_world(num_poses=80, seed=1)
+    graph = full.copy()
+    smoother = posegraph.Smoother(graph)
+    smoother.optimize()
+    assert smoother.solution.debt == 0.0
+    smoother.remove_edges([graph.num_edges - 1])
+    assert smoother.solution.debt is None
+    result = smoother.optimize(options=SolverOptions(skip_within=0.5))
+    assert not result.summary.termination.startswith(SKIPPED)
+    assert smoother.solution.debt == 0.0
+
+
+def test_skip_within_must_be_a_finite_share():
+    for bad in (-0.1, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="skip_within"):
+            SolverOptions(skip_within=bad)
