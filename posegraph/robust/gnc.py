@@ -201,10 +201,11 @@ def _search(
 ):
     """GNC's steps 1–4 (module docstring); returns (kept edges, the final solve, whether it
     began at ``start``, the local search's leverages at its solution or None). ``start``, the
-    kept edges of an earlier run extended by what was appended since, replaces steps 1–3 where least squares over it settles as it is, and
-    competes with them where it settles only after a change (``_settle_decisions``); without
-    ``graduate``, it is settled as step 3 settles GNC's decisions, and steps 1–3 never run.
-    Without ``search``, steps 3–4 do not run after steps 1–2."""
+    kept edges of an earlier run extended by what was appended since, replaces steps 1–3 where
+    least squares over it settles as it is, and competes with them where it settles only after
+    a change (``_settle_decisions``); without ``graduate``, it is settled as step 3 settles
+    GNC's decisions, and steps 1–3 never run. Without ``search``, steps 3–4 do not run after
+    steps 1–2."""
     if start is not None and not graduate:
         settled = settle_best(graph, mask, start, graph.values, width_sq, options, run)
         kept, result, leverage = local_search(graph, mask, *settled, width_sq, options, run)
