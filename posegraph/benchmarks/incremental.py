@@ -33,7 +33,7 @@ from ..io import load_graph
 from ..lie import LieGroup
 from ..robust.run import DECISIONS_AS_START
 from ..smoother import COMPOSED, RESTART, SKIPPED, Smoother
-from ..smoother.warm_start import compose_new_nodes
+from ..smoother.composition import compose_new_nodes
 from ..solvers import SolverOptions, Summary
 from .timing import at_least
 

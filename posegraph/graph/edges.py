@@ -8,6 +8,7 @@ import dataclasses
 import numpy as np
 
 from ..lie import LieGroup
+from ..lie.equality import same_entries
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -47,9 +48,9 @@ class EdgeSet:
         count = len(other)
         return (
             count <= len(self)
-            and np.array_equal(self.i[:count], other.i)
-            and np.array_equal(self.j[:count], other.j)
-            and np.array_equal(self.information[:count], other.information)
+            and same_entries(self.i[:count], other.i)
+            and same_entries(self.j[:count], other.j)
+            and same_entries(self.information[:count], other.information)
             and self.measurements[:count].same_as(other.measurements)
         )
 

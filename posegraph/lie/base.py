@@ -26,6 +26,7 @@ from typing import ClassVar, TypeVar
 import numpy as np
 
 from ._coeffs import series_terms
+from .equality import same_entries
 
 G = TypeVar("G", bound="LieGroup")
 
@@ -185,7 +186,7 @@ class LieGroup(ABC):
     def same_as(self, other: LieGroup) -> bool:
         """Whether ``other`` stores exactly the same elements (bit for bit)."""
         return type(other) is type(self) and all(
-            np.array_equal(getattr(self, n), getattr(other, n)) for n in self._event_ndims
+            same_entries(getattr(self, n), getattr(other, n)) for n in self._event_ndims
         )
 
     # ------------------------------------------------------------------ group-specific API
@@ -269,8 +270,7 @@ class LieGroup(ABC):
 
     @classmethod
     def jr(cls, tangent: np.ndarray) -> np.ndarray:
-        """Right Jacobian ``jr(ξ) = ∫₀¹ exp(−s ad_ξ) ds`` (Chirikjian, vol. 2, §10.2), by
-        ``integral_of_exp``."""
+        """Right Jacobian ``jr(ξ) = ∫₀¹ exp(−s ad_ξ) ds`` (Chirikjian, vol. 2, §10.2)."""
         return integral_of_exp(-cls.ad(tangent))
 
     @classmethod

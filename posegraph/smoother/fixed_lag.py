@@ -22,7 +22,7 @@ from ..init.choice import choose, initialize
 from ..lie import LieGroup
 from ..problem.factors import chi2
 from ..solvers import MAX_ITERATIONS, IterationRecord, Result, SolverOptions, Summary
-from . import warm_start
+from .composition import compose_new_nodes
 from .marginal import DENSE_SIZE, GaussianPrior, Quadratic, marginalized, quadratic
 
 INITIAL_DAMPING = 1e-5
@@ -186,7 +186,7 @@ class FixedLag:
             init = choose(graph)
             graph.set_values(initialize(graph, init), check=False)
             return init
-        warm_start.compose_new_nodes(graph, ~graph.initialized)
+        compose_new_nodes(graph, ~graph.initialized)
         return "warm start"
 
     def _window(self, graph: PoseGraph) -> _Window:

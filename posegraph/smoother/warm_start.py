@@ -11,18 +11,14 @@ import numpy as np
 
 from ..graph import EdgeSet, PoseGraph, connected_components, information_ranks, measured_dof
 from ..init.choice import choose, initialize
-from ..init.spanning_tree import align_to_priors, spanning_tree_values
 from ..problem.backends import resolve_backend
-from ..problem.factors import between_squares, chi2, linearize_between
+from ..problem.factors import between_squares, chi2
 from ..robust.kernels import default_width
 from ..robust.spec import Kernel
-from ..solvers import PHASES, Result, SolverOptions, Summary, solve
+from ..solvers import PHASES, Result, SolverOptions, Summary
+from .composition import compose_new_nodes, initialize_new_nodes
 from .solution import Solution
 
-LOCAL_RELATIVE_DECREASE = 1e-4
-"""Tolerance of the warm start's refinement of new nodes (the full solve follows)."""
-LOCAL_MAX_ITERATIONS = 10
-"""Most iterations of that refinement: a start, which the full solve finishes."""
 WARM_START_QUANTILE = 0.999
 """A warm start restarts from chordal when its new measurements' Σ rᵀΩr exceeds χ²_m(0.999)."""
 COMPOSED = (
@@ -87,14 +83,14 @@ def warm_start(
     graph: PoseGraph, solution: Solution, options: SolverOptions, least_squares: bool
 ) -> str:
     """Start from the previous solution, composing and refining the nodes added since
-    (``_initialize_new_nodes``); returns the initialisation's name.
+    (``composition.initialize_new_nodes``); returns the initialisation's name.
 
     A local start can sit in the wrong basin once new loop closures pull the map far (a noisy
     graph). In least squares, when the new measurements fail ``_agree_with_solution`` on a
     graph with loops, the values restart from chordal relaxation, as a new graph's would.
     """
     if not graph.initialized.all():
-        _initialize_new_nodes(graph, options)
+        initialize_new_nodes(graph, options)
     if least_squares and not _agree_with_solution(graph, solution) and choose(graph) == "chordal":
         graph.set_values(initialize(graph, "chordal"), check=False)
         return RESTART
@@ -143,22 +139,30 @@ def standing_decisions(graph: PoseGraph, solution: Solution, measured: np.ndarra
     )
 
 
-def _grew_by_a_tree(graph: PoseGraph, solution: Solution) -> bool:
-    """Whether all that was added to the graph since its last solution is a tree of between
-    edges that hangs the new nodes off the solved ones: nothing was removed since
-    (``Solution.debt``), the solution's edges and priors come first and unchanged,
-    and no prior, no hold and no cycle is new. Each new node then has one place that fits its
-    edges exactly, and the problem over the solved nodes is as it was."""
-    old, new_edges = len(solution.fixed), slice(len(solution.edges), None)
+def _grew_by_appending(graph: PoseGraph, solution: Solution) -> bool:
+    """Whether the graph grew since its last solution by appended nodes and between edges
+    alone: nothing was removed since (``Solution.debt``), the solution's edges and priors come
+    first and unchanged, and no prior and no hold is new."""
+    old = len(solution.fixed)
     return (
         solution.debt is not None
         and len(graph.priors) == len(solution.priors)
-        and _hangs_a_tree(graph.edges.i[new_edges], graph.edges.j[new_edges], old, graph.num_nodes)
         and np.array_equal(graph.fixed[:old], solution.fixed)
         and not graph.fixed[old:].any()
         and graph.edges.starts_with(solution.edges)
         and graph.priors.starts_with(solution.priors)
     )
+
+
+def _grew_by_a_tree(graph: PoseGraph, solution: Solution) -> bool:
+    """Whether all that was added to the graph since its last solution is a tree of between
+    edges that hangs the new nodes off the solved ones (``_grew_by_appending``, and no cycle is
+    new). Each new node then has one place that fits its edges exactly, and the problem over
+    the solved nodes is as it was."""
+    old, new_edges = len(solution.fixed), slice(len(solution.edges), None)
+    return _hangs_a_tree(
+        graph.edges.i[new_edges], graph.edges.j[new_edges], old, graph.num_nodes
+    ) and _grew_by_appending(graph, solution)
 
 
 def solution_extends(graph: PoseGraph, solution: Solution) -> bool:
@@ -187,19 +191,13 @@ def skipped_debt(graph: PoseGraph, solution: Solution, options: SolverOptions) -
     were solved for by at most the solution's ``debt`` (0 at a converged solve), the grown
     graph's optimum is at least that optimum (each measurement's cost is ≥ 0), and the cost at
     the warm start is that cost plus the added measurements' cost c: the excess is at most
-    ``debt`` + c. Only where the graph grew by appended nodes and edges alone (a new prior may
-    free a held node)."""
-    edges, priors, old = solution.edges, solution.priors, len(solution.fixed)
+    ``debt`` + c. Only where the graph grew by appended nodes and edges alone
+    (``_grew_by_appending``: a new prior may free a held node)."""
     if not (
         options.skip_within > 0
         and solution.summary.converged
-        and solution.debt is not None
-        and graph.edges.starts_with(edges)
-        and len(graph.priors) == len(priors)
-        and graph.priors.starts_with(priors)
-        and np.array_equal(graph.fixed[:old], solution.fixed)
-        and not graph.fixed[old:].any()
-        and graph.values[:old].same_as(solution.values)
+        and _grew_by_appending(graph, solution)
+        and graph.values[: len(solution.fixed)].same_as(solution.values)
     ):
         return None
     added = 0.5 * float(between_squares(graph.values, _added(graph, solution)).sum())
@@ -270,130 +268,3 @@ def _agree_with_solution(graph: PoseGraph, solution: Solution) -> bool:
     if dof == 0:
         return True
     return chi2(graph.values, new_edges, new_priors) <= default_width(dof, WARM_START_QUANTILE) ** 2
-
-
-DIRECT_COMPOSITION = 64
-"""At most this many new nodes, a few streamed poses, are composed one by one
-(``_compose_directly``); more, as a whole new map, go along a spanning tree."""
-
-
-def compose_new_nodes(graph: PoseGraph, new: np.ndarray) -> None:
-    """Values for the ``new`` nodes (a mask), composed from the others (and set in the graph):
-    directly where each hangs off a node with a value (``_compose_directly``: a pose or a few
-    streamed into a back end), else along a spanning tree of the edges that touch them, moved
-    onto their priors."""
-    if _compose_directly(graph, new):
-        return
-    local, local_new = _local_graph(graph, new)
-    solved = ~local_new
-    local.set_values(align_to_priors(local, spanning_tree_values(local, known=solved)), check=False)
-    graph.set_values(graph.values.set_at(np.flatnonzero(new), local.values[local_new]), check=False)
-
-
-def _compose_directly(graph: PoseGraph, new: np.ndarray) -> bool:
-    """Compose each new node in index order from one edge to a node that has a value by then
-    (the edge from the node before it if there is one, odometry, else the first), as a spanning
-    tree would along the same edges; False, and nothing set, where there are more than
-    ``DIRECT_COMPOSITION`` new nodes, a new node has a prior, or one has no such edge."""
-    indices = np.flatnonzero(new)
-    if indices.size > DIRECT_COMPOSITION or _has_priors(graph, indices):
-        return False
-    edges = graph.edges
-    touching = np.flatnonzero(new[edges.i] | new[edges.j])
-    i, j = edges.i[touching], edges.j[touching]
-    values, valued = graph.values, ~new
-    for node in indices.tolist():
-        forward = touching[(j == node) & valued[i]]  # Xⱼ = Xᵢ Z
-        backward = touching[(i == node) & valued[j]]  # Xᵢ = Xⱼ Z⁻¹
-        if forward.size:
-            edge = next((e for e in forward.tolist() if edges.i[e] == node - 1), int(forward[0]))
-            value = values[edges.i[edge]] @ edges.measurements[edge]
-        elif backward.size:
-            edge = int(backward[0])
-            value = values[edges.j[edge]] @ edges.measurements[edge].inverse()
-        else:
-            return False
-        values = values.set_at(node, value)
-        valued[node] = True
-    graph.set_values(values, check=False)
-    return True
-
-
-def _has_priors(graph: PoseGraph, nodes: np.ndarray) -> bool:
-    """Whether a prior measures any of the node indices ``nodes``."""
-    return bool(np.isin(graph.priors.i, nodes).any())
-
-
-def _local_graph(graph: PoseGraph, new: np.ndarray) -> tuple[PoseGraph, np.ndarray]:
-    """The graph of the ``new`` nodes, the nodes they touch (held) and the edges between them,
-    with the new nodes' priors; and which of its nodes are new."""
-    touching = new[graph.edges.i] | new[graph.edges.j]
-    involved = new.copy()
-    involved[graph.edges.i[touching]] = involved[graph.edges.j[touching]] = True
-    local = graph.subgraph(involved, edges=touching)
-    solved = ~new[involved]
-    local.fixed = solved
-    local.priors = local.priors.subset(~solved[local.priors.i])
-    return local, ~solved
-
-
-def _initialize_new_nodes(graph: PoseGraph, options: SolverOptions) -> None:
-    """Values for nodes added since the last solution: compose them from solved neighbours along
-    a spanning tree (``compose_new_nodes``), then refine them alone (solved nodes held) over
-    the edges that touch them, so that the full solve starts close to its optimum."""
-    new = ~graph.initialized
-    compose_new_nodes(graph, new)
-    node = np.flatnonzero(new)
-    if node.size == 1 and not _has_priors(graph, node):
-        _refine_one(graph, int(node[0]), min(options.max_iterations, LOCAL_MAX_ITERATIONS))
-        return
-    local, local_new = _local_graph(graph, new)
-    local_options = dataclasses.replace(
-        options,
-        relative_decrease=LOCAL_RELATIVE_DECREASE,
-        max_iterations=min(options.max_iterations, LOCAL_MAX_ITERATIONS),
-    )
-    refined = solve(local, local_options)
-    graph.set_values(
-        graph.values.set_at(np.flatnonzero(new), refined.values[local_new]), check=False
-    )
-
-
-def _refine_one(graph: PoseGraph, node: int, max_iterations: int) -> None:
-    """The local refinement of one new node (no prior on it), its neighbours held: Levenberg-
-    Marquardt on its d × d normal equations over the edges that touch it, with the local
-    solve's tolerance; a streamed pose spared the set-up of a whole solve."""
-    edges = graph.edges
-    local = edges.subset(np.flatnonzero((edges.i == node) | (edges.j == node)))
-    ends_at_i = (local.i == node)[:, None, None]
-    d = graph.group.dof
-
-    def linearized(value):
-        values = graph.values.set_at(node, value)
-        linearization = linearize_between(values, local)
-        r = linearization.residuals
-        jacobian = np.where(
-            ends_at_i, linearization.jacobians[..., :d], linearization.jacobians[..., d:]
-        )
-        weighted = local.information @ jacobian  # Ω J
-        hessian = np.einsum("mai,maj->ij", jacobian, weighted)
-        gradient = np.einsum("mai,ma->i", weighted, r)
-        return 0.5 * float(np.einsum("ma,mab,mb->", r, local.information, r)), hessian, gradient
-
-    value = graph.values[node]
-    cost, hessian, gradient = linearized(value)
-    damping = 1e-6
-    for _ in range(max_iterations):
-        damped = hessian + damping * np.diag(np.maximum(np.diag(hessian), 1e-12))
-        step = np.linalg.lstsq(damped, -gradient, rcond=None)[0]
-        trial = value.retract(step)
-        trial_cost, trial_hessian, trial_gradient = linearized(trial)
-        if not trial_cost < cost:
-            damping *= 10.0
-            continue
-        decrease = cost - trial_cost
-        value, cost, hessian, gradient = trial, trial_cost, trial_hessian, trial_gradient
-        damping = max(damping / 10.0, 1e-12)
-        if decrease <= LOCAL_RELATIVE_DECREASE * (cost + decrease):
-            break
-    graph.set_values(graph.values.set_at(node, value), check=False)

@@ -8,7 +8,7 @@ import pytest
 from posegraph_datasets.generators import manhattan_world
 
 from posegraph.init.spanning_tree import spanning_tree_values
-from posegraph.smoother import warm_start
+from posegraph.smoother import composition, warm_start
 
 
 def test_direct_composition_equals_the_spanning_tree_along_the_same_edges():
@@ -18,7 +18,7 @@ def test_direct_composition_equals_the_spanning_tree_along_the_same_edges():
     new = np.arange(40) >= 30
     expected = spanning_tree_values(graph, known=~new)
     composed = graph.copy()
-    assert warm_start._compose_directly(composed, new)
+    assert composition._compose_directly(composed, new)
     for k in range(30, 40):
         np.testing.assert_allclose(
             composed.values[k].as_matrix(), expected[k].as_matrix(), atol=1e-9
@@ -30,9 +30,9 @@ def test_direct_composition_declines_what_it_cannot_do():
     unreachable = np.zeros(40, dtype=bool)
     unreachable[[10, 11]] = True
     graph.remove_edges((graph.edges.i == 10) | (graph.edges.j == 10))
-    assert not warm_start._compose_directly(graph, unreachable)  # node 10 hangs off nothing
-    many = np.arange(40) >= 40 - warm_start.DIRECT_COMPOSITION - 1
-    assert not warm_start._compose_directly(graph, many)
+    assert not composition._compose_directly(graph, unreachable)  # node 10 hangs off nothing
+    many = np.arange(40) >= 40 - composition.DIRECT_COMPOSITION - 1
+    assert not composition._compose_directly(graph, many)
 
 
 @pytest.mark.parametrize("seed", range(20))
@@ -43,7 +43,7 @@ def test_the_tree_test_agrees_with_connected_components(seed, monkeypatch):
     count = old + new
     i, j = rng.integers(0, count, size=(2, new))
     fast = warm_start._hangs_a_tree(i, j, old, count)
-    monkeypatch.setattr(warm_start, "DIRECT_COMPOSITION", 0)
+    monkeypatch.setattr(composition, "DIRECT_COMPOSITION", 0)
     assert fast == warm_start._hangs_a_tree(i, j, old, count)
 
 
@@ -58,11 +58,11 @@ def test_one_new_node_is_refined_to_the_local_optimum_of_a_whole_local_solve():
     last = int(np.argmax(degree))
     assert degree[last] >= 3  # odometry both ways and a loop
     new = np.arange(graph.num_nodes) == last
-    assert warm_start._compose_directly(graph, new)
-    local, local_new = warm_start._local_graph(graph, new)
+    assert composition._compose_directly(graph, new)
+    local, local_new = composition._local_graph(graph, new)
     tight = SolverOptions(relative_decrease=1e-12, max_iterations=50)
     expected = solve(local, tight).values[local_new][0]
     start = graph.values[last].as_matrix()
     assert np.abs(start - expected.as_matrix()).max() > 1e-3  # the loop moves it
-    warm_start._refine_one(graph, last, 50)
+    composition._refine_one(graph, last, 50)
     np.testing.assert_allclose(graph.values[last].as_matrix(), expected.as_matrix(), atol=1e-6)
