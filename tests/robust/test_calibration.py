@@ -188,24 +188,17 @@ def test_the_noise_check_borrows_the_local_searchs_leverages_and_agrees_with_its
     edge_inliers = np.ones(corrupted.num_edges, dtype=bool)
     edge_inliers[outcome.rejected] = False
     prior_inliers = np.ones(len(corrupted.priors), dtype=bool)
-    own = calibration._with_left_out(
-        corrupted,
-        calibration._inliers(corrupted, edge_inliers, prior_inliers),
-        result.values,
-        edge_inliers,
-        prior_inliers,
-        dataclasses.replace(result, leverage=None),
-    )
+    work = calibration._inliers(corrupted, edge_inliers, prior_inliers)
+
+    def tests_after(solved):
+        return calibration._with_left_out(
+            corrupted, work, result.values, edge_inliers, prior_inliers, solved
+        )
+
+    own = tests_after(dataclasses.replace(result, leverage=None))
     computed = []
     monkeypatch.setattr(noise, "deleted_residuals", lambda *a, **k: computed.append(a))
-    lent = calibration._with_left_out(
-        corrupted,
-        calibration._inliers(corrupted, edge_inliers, prior_inliers),
-        result.values,
-        edge_inliers,
-        prior_inliers,
-        result,
-    )
+    lent = tests_after(result)
     assert computed == []
     for field in dataclasses.fields(own):
         np.testing.assert_allclose(
