@@ -74,7 +74,9 @@ def _readmit(graph, mask, kept, result, objective, width_sq, options, leverage, 
     before is within ``NEAR`` c². This repeats over the remaining candidates until all are
     explained, then the kept set with them is settled. The loops of a drifted region pull it
     back for each other; a lone false loop is consistent only with the solution bent to fit
-    it, and without it, its misfit is what it was.
+    it, and without it, its misfit is what it was. Candidates whose joint solve does not
+    converge do not fit together (hundreds of false loops, each consistent alone, crumpling
+    the map): nothing is re-admitted.
     Returns (kept, result or None, its TLS objective)."""
     rejected = np.flatnonzero(mask & ~kept)
     if rejected.size == 0:
@@ -93,7 +95,10 @@ def _readmit(graph, mask, kept, result, objective, width_sq, options, leverage, 
         with_candidates[candidates] = True
         work = graph.with_edges(with_candidates)
         work.set_values(values, check=False)
-        values = run.solve(work, options, "re-admit").values
+        readmitted = run.solve(work, options, "re-admit")
+        if not readmitted.summary.converged:
+            break
+        values = readmitted.values
         position = np.cumsum(with_candidates) - 1  # of each edge in ``work``
         squares = deleted_residuals(
             work, values, edges=position[candidates], linear_solver=options.linear_solver

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 import scipy.stats as scipy_stats
@@ -281,6 +283,25 @@ def test_gnc_readmits_true_loops_just_outside_the_width_that_fit_only_together(
     monkeypatch.setattr(local_search, "NEAR", 0.0)
     found, lowered = readmitted()
     assert not found[pair].any() and not lowered
+    monkeypatch.undo()
+
+    # A joint solve that does not converge (as where hundreds of false loops crumple the map)
+    # ends the re-admission: nothing is re-admitted, and nothing is settled.
+    solve, stages = tls.Run.solve, []
+
+    def unconverged_readmission(self, graph, options, stage, system=None):
+        stages.append(stage)
+        result = solve(self, graph, options, stage, system)
+        if stage != "re-admit":
+            return result
+        return dataclasses.replace(
+            result, summary=dataclasses.replace(result.summary, converged=False)
+        )
+
+    monkeypatch.setattr(tls.Run, "solve", unconverged_readmission)
+    found, lowered = readmitted()
+    assert np.array_equal(found, kept) and not lowered
+    assert stages == ["re-admit"]
 
 
 def test_gnc_keeps_a_false_loop_that_the_map_fits_more_cheaply_than_its_rejection(shared_dataset):
