@@ -74,9 +74,10 @@ def _readmit(graph, mask, kept, result, objective, width_sq, options, leverage, 
     before is within ``NEAR`` c². This repeats over the remaining candidates until all are
     explained, then the kept set with them is settled. The loops of a drifted region pull it
     back for each other; a lone false loop is consistent only with the solution bent to fit
-    it, and without it, its misfit is what it was. Candidates whose joint solve does not
-    converge do not fit together (hundreds of false loops, each consistent alone, crumpling
-    the map): nothing is re-admitted.
+    it, and without it, its misfit is what it was. More candidates than ``JOINT_POOL`` whose
+    joint solve does not converge do not fit together (hundreds of false loops, each
+    consistent alone, crumpling the map): nothing is re-admitted. (A few true loops of a
+    monocular sequence's drifted scale can take more iterations than a solve has.)
     Returns (kept, result or None, its TLS objective)."""
     rejected = np.flatnonzero(mask & ~kept)
     if rejected.size == 0:
@@ -96,7 +97,7 @@ def _readmit(graph, mask, kept, result, objective, width_sq, options, leverage, 
         work = graph.with_edges(with_candidates)
         work.set_values(values, check=False)
         readmitted = run.solve(work, options, "re-admit")
-        if not readmitted.summary.converged:
+        if candidates.size > JOINT_POOL and not readmitted.summary.converged:
             break
         values = readmitted.values
         position = np.cumsum(with_candidates) - 1  # of each edge in ``work``

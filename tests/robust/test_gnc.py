@@ -285,8 +285,9 @@ def test_gnc_readmits_true_loops_just_outside_the_width_that_fit_only_together(
     assert not found[pair].any() and not lowered
     monkeypatch.undo()
 
-    # A joint solve that does not converge (as where hundreds of false loops crumple the map)
-    # ends the re-admission: nothing is re-admitted, and nothing is settled.
+    # More candidates than JOINT_POOL (here 1) whose joint solve does not converge (as where
+    # hundreds of false loops crumple the map) end the re-admission: nothing is re-admitted,
+    # and nothing is settled.
     solve, stages = tls.Run.solve, []
 
     def unconverged_readmission(self, graph, options, stage, system=None):
@@ -299,6 +300,7 @@ def test_gnc_readmits_true_loops_just_outside_the_width_that_fit_only_together(
         )
 
     monkeypatch.setattr(tls.Run, "solve", unconverged_readmission)
+    monkeypatch.setattr(local_search, "JOINT_POOL", 1)
     found, lowered = readmitted()
     assert np.array_equal(found, kept) and not lowered
     assert stages == ["re-admit"]
