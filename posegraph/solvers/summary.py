@@ -134,9 +134,10 @@ class Result:
     GNC's local search computed them there, for reuse by the noise check."""
 
     def __getstate__(self) -> dict:
-        """Pickled and deep-copied without ``system`` (its factorisation holds CHOLMOD handles
-        that cannot be pickled); a warm start from the copy builds the system anew."""
-        return {**self.__dict__, "system": None}
+        """Pickled and deep-copied without ``system`` and ``leverage`` (their factorisations
+        hold CHOLMOD handles that cannot be pickled); a warm start from the copy builds the
+        system anew."""
+        return {**self.__dict__, "system": None, "leverage": None}
 
 
 def in_turn(summaries: list[Summary]) -> list[IterationRecord]:

@@ -301,6 +301,11 @@ def test_a_smoother_and_its_result_pickle_and_warm_start_alike():
         pickle.loads(pickle.dumps(result)).values.as_matrix(), result.values.as_matrix()
     )
     assert copy.deepcopy(result).summary == result.summary
+    corrupted, _ = add_false_loops(graph, 0.1, seed=0)  # GNC's result carries its leverages
+    robust = posegraph.optimize(corrupted, robust="gnc")
+    assert robust.leverage is not None
+    for restored in (pickle.loads(pickle.dumps(robust)), copy.deepcopy(robust)):
+        assert restored.leverage is None and restored.summary == robust.summary
     summaries = []
     for s in [smoother, *copies]:
         g = s.graph
