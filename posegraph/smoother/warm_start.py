@@ -9,7 +9,7 @@ import dataclasses
 
 import numpy as np
 
-from ..graph import EdgeSet, PoseGraph, connected_components, information_ranks, measured_dof
+from ..graph import PoseGraph, connected_components, information_ranks, measured_dof
 from ..init.choice import choose, initialize
 from ..problem.backends import resolve_backend
 from ..problem.factors import between_squares, chi2
@@ -200,7 +200,7 @@ def skipped_debt(graph: PoseGraph, solution: Solution, options: SolverOptions) -
         and graph.values[: len(solution.fixed)].same_as(solution.values)
     ):
         return None
-    added = 0.5 * float(between_squares(graph.values, _added(graph, solution)).sum())
+    added = _added_cost(graph, solution)
     return affordable(solution.debt + added, solution.summary.final_error + added, options)
 
 
@@ -210,9 +210,10 @@ def affordable(debt: float, cost: float, options: SolverOptions) -> float | None
     return debt if debt == 0 or debt <= options.skip_within * cost else None
 
 
-def _added(graph: PoseGraph, solution: Solution) -> EdgeSet:
-    """The edges appended since the solution."""
-    return graph.edges.subset(slice(len(solution.edges), None))
+def _added_cost(graph: PoseGraph, solution: Solution) -> float:
+    """½ Σ rᵀΩr of the edges appended since the solution, at the graph's values."""
+    added = graph.edges.subset(slice(len(solution.edges), None))
+    return 0.5 * float(between_squares(graph.values, added).sum())
 
 
 def composed_result(
@@ -223,9 +224,7 @@ def composed_result(
     solution's plus that of the measurements added since (for a tree, zero but for rounding),
     and the free nodes are the solution's and the new ones (neither adds a hold)."""
     previous = solution.summary
-    error = previous.final_error + 0.5 * float(
-        between_squares(graph.values, _added(graph, solution)).sum()
-    )
+    error = previous.final_error + _added_cost(graph, solution)
     new_nodes = graph.num_nodes - len(solution.fixed)
     summary = Summary(
         method=options.method,
