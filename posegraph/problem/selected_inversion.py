@@ -95,10 +95,18 @@ class SupernodalFactor:
 def _lower_blocks(factor: SupernodalFactor, supernodes: np.ndarray, height: int, width: int):
     """L's dense (g, height, width) blocks of supernodes of one shape (zero above the diagonal):
     column c of a supernode holds its rows from the c-th on, height − c entries that follow
-    column c − 1's in L's data."""
+    column c − 1's in L's data. A lone supernode's columns are copied as slices."""
+    starts = factor._indptr[factor.first[supernodes]]
+    if supernodes.size == 1 and width > TRIANGULAR_LEAF:
+        columns = np.zeros((1, width, height))  # Lᵀ, row by row
+        offset = int(starts[0])
+        for column in range(width):
+            columns[0, column, column:] = factor._data[offset : offset + height - column]
+            offset += height - column
+        return np.swapaxes(columns, 1, 2)
     row, column = np.arange(height)[:, None], np.arange(width)[None, :]
     within = column * height - column * (column - 1) // 2 + np.maximum(row - column, 0)
-    lower = factor._data.take(factor._indptr[factor.first[supernodes]][:, None, None] + within)
+    lower = factor._data.take(starts[:, None, None] + within)
     lower[:, :width] *= row[:width] >= column
     return lower
 
@@ -106,7 +114,7 @@ def _lower_blocks(factor: SupernodalFactor, supernodes: np.ndarray, height: int,
 def _triangular_inverse(lower: np.ndarray) -> np.ndarray:
     """The inverses of stacked (g, w, w) lower-triangular matrices, by halves:
     [[A, 0], [B, C]]⁻¹ = [[A⁻¹, 0], [−C⁻¹ B A⁻¹, C⁻¹]] (a recursive TRTRI: about w³/3
-    multiplications, in matrix products, where an LU inverse takes 2w³)."""
+    multiplications, where an LU inverse takes 2w³)."""
     width = lower.shape[-1]
     if width <= TRIANGULAR_LEAF:
         return np.linalg.inv(lower)
@@ -114,8 +122,55 @@ def _triangular_inverse(lower: np.ndarray) -> np.ndarray:
     inverse = np.zeros_like(lower)
     top = inverse[:, :half, :half] = _triangular_inverse(lower[:, :half, :half])
     bottom = inverse[:, half:, half:] = _triangular_inverse(lower[:, half:, half:])
-    inverse[:, half:, :half] = -(bottom @ lower[:, half:, :half]) @ top
+    inverse[:, half:, :half] = -_times_lower(_lower_times(bottom, lower[:, half:, :half]), top)
     return inverse
+
+
+def _lower_times(lower: np.ndarray, dense: np.ndarray) -> np.ndarray:
+    """L X for stacked lower-triangular L (g, n, n) and X (g, n, k), by halves, so that L's
+    zero upper right is not multiplied: about n²k multiplications, where a product of the full
+    matrices takes 2n²k (a recursive TRMM)."""
+    width = lower.shape[-1]
+    if width <= TRIANGULAR_LEAF:
+        return lower @ dense
+    half = width // 2
+    product = np.empty_like(dense)
+    product[:, :half] = _lower_times(lower[:, :half, :half], dense[:, :half])
+    product[:, half:] = lower[:, half:, :half] @ dense[:, :half]
+    product[:, half:] += _lower_times(lower[:, half:, half:], dense[:, half:])
+    return product
+
+
+def _times_lower(dense: np.ndarray, lower: np.ndarray) -> np.ndarray:
+    """X L for X (g, k, n) and stacked lower-triangular L (g, n, n), by halves, as
+    ``_lower_times``: [X₁ X₂] [[A, 0], [B, C]] = [X₁ A + X₂ B, X₂ C]."""
+    width = lower.shape[-1]
+    if width <= TRIANGULAR_LEAF:
+        return dense @ lower
+    half = width // 2
+    product = np.empty_like(dense)
+    product[..., :half] = _times_lower(dense[..., :half], lower[:, :half, :half])
+    product[..., :half] += dense[..., half:] @ lower[:, half:, :half]
+    product[..., half:] = _times_lower(dense[..., half:], lower[:, half:, half:])
+    return product
+
+
+def _gram_of_lower(lower: np.ndarray) -> np.ndarray:
+    """Lᵀ L of stacked lower-triangular (g, w, w) matrices, by halves: with L = [[A, 0], [B, C]],
+    Lᵀ L = [[AᵀA + BᵀB, BᵀC], [CᵀB, CᵀC]] (a recursive LAUUM: about 2w³/3 multiplications,
+    where a product of the full matrices takes 2w³)."""
+    width = lower.shape[-1]
+    if width <= TRIANGULAR_LEAF:
+        return np.swapaxes(lower, 1, 2) @ lower
+    half = width // 2
+    below, right = lower[:, half:, :half], lower[:, half:, half:]
+    gram = np.empty_like(lower)
+    gram[:, :half, :half] = _gram_of_lower(lower[:, :half, :half])
+    gram[:, :half, :half] += np.swapaxes(below, 1, 2) @ below
+    gram[:, :half, half:] = _times_lower(np.swapaxes(below, 1, 2), right)
+    gram[:, half:, :half] = np.swapaxes(gram[:, :half, half:], 1, 2)
+    gram[:, half:, half:] = _gram_of_lower(right)
+    return gram
 
 
 class SelectedInverse:
@@ -202,12 +257,12 @@ def _selected_inverse(factor: SupernodalFactor, columns: np.ndarray) -> Selected
         lower = _lower_blocks(factor, supernodes, height, width)
         diagonal_inverse = _triangular_inverse(lower[:, :width])  # L_CC⁻¹
         front = np.empty((supernodes.size, height, height))
-        front[:, :width, :width] = np.swapaxes(diagonal_inverse, 1, 2) @ diagonal_inverse
+        front[:, :width, :width] = _gram_of_lower(diagonal_inverse)
         if height > width:
             first_entries = factor._indptr[factor.first[supernodes]]
             rows = factor._indices[first_entries[:, None] + np.arange(width, height)]
             fronts.lower_right(supernodes, rows, front[:, width:, width:])  # Σ_RR
-            u = lower[:, width:] @ diagonal_inverse
+            u = _times_lower(lower[:, width:], diagonal_inverse)
             front[:, width:, :width] = -front[:, width:, width:] @ u  # Σ_RC
             front[:, :width, :width] -= np.swapaxes(u, 1, 2) @ front[:, width:, :width]
             front[:, :width, width:] = np.swapaxes(front[:, width:, :width], 1, 2)

@@ -13,6 +13,9 @@ from posegraph.problem.backends import available_backends, make_cholesky
 from posegraph.problem.selected_inversion import (
     TRIANGULAR_LEAF,
     SupernodalFactor,
+    _gram_of_lower,
+    _lower_times,
+    _times_lower,
     _triangular_inverse,
     inverse_blocks,
     selected_inverse,
@@ -98,6 +101,19 @@ def test_triangular_inverse_by_halves_is_the_inverse(width):
         inverse @ lower, np.broadcast_to(np.eye(width), lower.shape), atol=1e-13
     )
     assert np.all(np.triu(inverse, 1) == 0)
+
+
+@pytest.mark.parametrize("width", [TRIANGULAR_LEAF, TRIANGULAR_LEAF + 1, 3 * TRIANGULAR_LEAF + 7])
+def test_products_with_a_triangle_by_halves_are_the_products(width):
+    """L X, X L and Lᵀ L for stacked lower-triangular L, as wide as one product takes them and
+    wider (by halves, twice), equal the products of the full matrices."""
+    rng = np.random.default_rng(width)
+    lower = np.tril(rng.normal(size=(2, width, width)))
+    right, left = rng.normal(size=(2, width, 5)), rng.normal(size=(2, 7, width))
+    np.testing.assert_allclose(_lower_times(lower, right), lower @ right, atol=1e-12)
+    np.testing.assert_allclose(_times_lower(left, lower), left @ lower, atol=1e-12)
+    gram = np.swapaxes(lower, 1, 2) @ lower
+    np.testing.assert_allclose(_gram_of_lower(lower), gram, atol=1e-12)
 
 
 def test_a_wide_supernode_and_many_narrow_ones():
