@@ -53,6 +53,7 @@ class BlockPattern(BlockLayout):
             covariance_of is not None,
             previous.cholesky if self.grown else None,
             self.appended,
+            d,
         )
 
     def factorize(self, data: np.ndarray, damping: np.ndarray | None = None) -> None:
