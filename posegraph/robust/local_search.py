@@ -4,6 +4,8 @@ TLS objective."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from ..problem.cholesky import NotPositiveDefinite
@@ -16,6 +18,10 @@ LOCAL_SEARCH_ROUNDS = 3
 JOINT_POOL = 32
 """Re-admission weighs together at most this many rejected loops, those of smallest
 innovation (``_jointly_consistent``)."""
+JOINT_ITERATIONS = 20
+"""Most iterations of a joint solve of more than ``JOINT_POOL`` re-admitted loops: those that
+fit together converge in a few (2 on manhattan), those that crumple the map do not converge in
+100 (w10000 and parking-garage: ``docs/architecture.md``)."""
 EXPLAINED = 0.75
 """Re-admission: the share of a rejected loop's s that the other re-admitted loops must remove.
 The others explain none of a lone false loop's s at first order, but some through the
@@ -75,9 +81,10 @@ def _readmit(graph, mask, kept, result, objective, width_sq, options, leverage, 
     explained, then the kept set with them is settled. The loops of a drifted region pull it
     back for each other; a lone false loop is consistent only with the solution bent to fit
     it, and without it, its misfit is what it was. More candidates than ``JOINT_POOL`` whose
-    joint solve does not converge do not fit together (hundreds of false loops, each
-    consistent alone, crumpling the map): nothing is re-admitted. (A few true loops of a
-    monocular sequence's drifted scale can take more iterations than a solve has.)
+    joint solve does not converge within ``JOINT_ITERATIONS`` do not fit together (hundreds of
+    false loops, each consistent alone, crumpling the map): nothing is re-admitted. (A few
+    true loops of a monocular sequence's drifted scale can take more iterations than a solve
+    has.)
     Returns (kept, result or None, its TLS objective)."""
     rejected = np.flatnonzero(mask & ~kept)
     if rejected.size == 0:
@@ -96,8 +103,9 @@ def _readmit(graph, mask, kept, result, objective, width_sq, options, leverage, 
         with_candidates[candidates] = True
         work = graph.with_edges(with_candidates)
         work.set_values(values, check=False)
-        readmitted = run.solve(work, options, "re-admit")
-        if candidates.size > JOINT_POOL and not readmitted.summary.converged:
+        many = candidates.size > JOINT_POOL
+        readmitted = run.solve(work, _joint_options(options) if many else options, "re-admit")
+        if many and not readmitted.summary.converged:
             break
         values = readmitted.values
         position = np.cumsum(with_candidates) - 1  # of each edge in ``work``
@@ -113,6 +121,13 @@ def _readmit(graph, mask, kept, result, objective, width_sq, options, leverage, 
             return settle_best(graph, mask, with_candidates, values, width_sq, options, run)
         candidates = candidates[explained]
     return kept, None, objective
+
+
+def _joint_options(options):
+    """``options`` with at most ``JOINT_ITERATIONS`` iterations."""
+    return dataclasses.replace(
+        options, max_iterations=min(options.max_iterations, JOINT_ITERATIONS)
+    )
 
 
 def _jointly_consistent(graph, rejected, innovation, width_sq, leverage: Leverage) -> np.ndarray:

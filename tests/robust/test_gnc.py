@@ -285,13 +285,13 @@ def test_gnc_readmits_true_loops_just_outside_the_width_that_fit_only_together(
     assert not found[pair].any() and not lowered
     monkeypatch.undo()
 
-    # More candidates than JOINT_POOL (here 1) whose joint solve does not converge (as where
-    # hundreds of false loops crumple the map) end the re-admission: nothing is re-admitted,
-    # and nothing is settled.
+    # More candidates than JOINT_POOL (here 1) whose joint solve does not converge within
+    # JOINT_ITERATIONS (as where hundreds of false loops crumple the map) end the re-admission:
+    # nothing is re-admitted, and nothing is settled.
     solve, stages = tls.Run.solve, []
 
     def unconverged_readmission(self, graph, options, stage, system=None):
-        stages.append(stage)
+        stages.append((stage, options.max_iterations))
         result = solve(self, graph, options, stage, system)
         if stage != "re-admit":
             return result
@@ -303,7 +303,7 @@ def test_gnc_readmits_true_loops_just_outside_the_width_that_fit_only_together(
     monkeypatch.setattr(local_search, "JOINT_POOL", 1)
     found, lowered = readmitted()
     assert np.array_equal(found, kept) and not lowered
-    assert stages == ["re-admit"]
+    assert stages == [("re-admit", local_search.JOINT_ITERATIONS)]
 
 
 def test_gnc_keeps_a_false_loop_that_the_map_fits_more_cheaply_than_its_rejection(shared_dataset):
