@@ -53,17 +53,21 @@ def make_cholesky(
     for_covariance: bool = False,
     previous=None,
     appended: Appended | None = None,
-    block: int = 1,
+    diagonal_blocks: np.ndarray | None = None,
 ):
     """A factoriser for the symmetric CSC pattern (both triangles stored, sorted indices);
     ``for_covariance`` prepares it for ``covariance_blocks`` (a direct one). ``previous``, a
     factoriser for a pattern this one grew from (as ``appended`` says, where known), may speed
-    up the set-up. ``block``: the rows and columns of a node, whose diagonal blocks precondition
-    conjugate gradients."""
+    up the set-up. ``diagonal_blocks``, where the CSC data holds the nodes' diagonal blocks
+    (``BlockLayout.diagonal_blocks``), precondition conjugate gradients."""
     if backend == "cg" and not for_covariance:
         direct = available_backends()[0]
         return ConjugateGradients(
-            indices, indptr, size, lambda: make_cholesky(indices, indptr, size, direct), block
+            indices,
+            indptr,
+            size,
+            lambda: make_cholesky(indices, indptr, size, direct),
+            diagonal_blocks,
         )
     name = resolve_backend("auto" if backend == "cg" else backend)
     if name == "scipy":
@@ -72,7 +76,7 @@ def make_cholesky(
     grown_from = previous if isinstance(previous, CholmodCholesky) else None
     cholmod = CholmodCholesky(indices, indptr, size, for_covariance, grown_from, appended)
     if backend == "auto" and not for_covariance and _fills(cholmod, indices.size):
-        return ConjugateGradients(indices, indptr, size, lambda: cholmod, block)
+        return ConjugateGradients(indices, indptr, size, lambda: cholmod, diagonal_blocks)
     return cholmod
 
 

@@ -33,9 +33,9 @@ MAX_ITERATIONS = 3000
 
 class ConjugateGradients:
     """Preconditioned conjugate gradients (scipy's ``cg``, the block-Jacobi preconditioner)
-    over the symmetric CSC pattern (both triangles, sorted indices) of a matrix in blocks of
-    ``block`` rows and columns (a node's tangent); ``direct`` makes the factoriser that a solve
-    falls back to, on first need."""
+    over the symmetric CSC pattern (both triangles, sorted indices); ``diagonal_blocks``, where
+    its data holds the nodes' diagonal blocks (k, d, d), by default the diagonal's entries
+    (Jacobi); ``direct`` makes the factoriser that a solve falls back to, on first need."""
 
     name = "cg"
     inverts_selectively = False
@@ -46,11 +46,14 @@ class ConjugateGradients:
         indptr: np.ndarray,
         size: int,
         direct: Callable[[], object],
-        block: int = 1,
+        diagonal_blocks: np.ndarray | None = None,
     ) -> None:
         self.size = size
         self._indices, self._indptr = indices, indptr
-        self._block_positions = _diagonal_block_positions(indices, indptr, size, block)
+        if diagonal_blocks is None:
+            columns = np.repeat(np.arange(size), np.diff(indptr))
+            diagonal_blocks = np.flatnonzero(indices == columns)[:, None, None]
+        self._diagonal_blocks = diagonal_blocks
         self._make_direct, self._direct = direct, None
         self._data: np.ndarray | None = None
         self._factorised = False
@@ -86,9 +89,9 @@ class ConjugateGradients:
         import scipy.sparse
         import scipy.sparse.linalg
 
-        if self._block_positions is None:
-            return None
-        blocks = self._data[self._block_positions]
+        if self._diagonal_blocks.size != self.size * self._diagonal_blocks.shape[-1]:
+            return None  # the pattern lacks a diagonal entry
+        blocks = self._data[self._diagonal_blocks]
         try:
             np.linalg.cholesky(blocks)
         except np.linalg.LinAlgError:
@@ -132,19 +135,3 @@ class ConjugateGradients:
     def direct(self):
         """The direct factoriser, if made (a grown pattern's factoriser starts from it)."""
         return self._direct
-
-
-def _diagonal_block_positions(
-    indices: np.ndarray, indptr: np.ndarray, size: int, block: int
-) -> np.ndarray | None:
-    """Where the CSC data holds each diagonal block's entries, (size / block, block, block),
-    entry [k, a, c] at row k·block + a and column k·block + c; the diagonal's, (size, 1, 1),
-    where the pattern does not hold whole blocks; None where it does not hold the diagonal."""
-    keys = np.repeat(np.arange(size), np.diff(indptr)) * size + indices  # sorted, as CSC is
-    for width in dict.fromkeys((block, 1)):
-        first = np.arange(0, size, width)[:, None, None]
-        wanted = ((first + np.arange(width)) * size + first + np.arange(width)[:, None]).ravel()
-        positions = np.minimum(np.searchsorted(keys, wanted), max(keys.size - 1, 0))
-        if size % width == 0 and keys.size and np.array_equal(keys[positions], wanted):
-            return positions.reshape(-1, width, width)
-    return None

@@ -53,7 +53,7 @@ class BlockPattern(BlockLayout):
             covariance_of is not None,
             previous.cholesky if self.grown else None,
             self.appended,
-            d,
+            self.diagonal_blocks(),
         )
 
     def factorize(self, data: np.ndarray, damping: np.ndarray | None = None) -> None:

@@ -160,11 +160,17 @@ class BlockLayout:
         entries = (rows * d)[:, None, None] + within[None, :, None]
         return np.broadcast_to(entries, (blocks.size, d, d)).reshape(-1, d * d)
 
+    def diagonal_blocks(self, nodes: np.ndarray | None = None) -> np.ndarray:
+        """(k, d, d): where in ``data`` the entries of these nodes' diagonal blocks sit (by
+        default every free node's), row-major."""
+        nodes = np.arange(self.num_blocks) if nodes is None else nodes
+        blocks = np.searchsorted(self._block_keys, self._keys(nodes, nodes))
+        return self._positions(blocks).reshape(-1, self.d, self.d)
+
     def _diagonal_positions(self, nodes: np.ndarray) -> np.ndarray:
         """The positions in ``data`` of the diagonals of these blocks' diagonal blocks."""
         within = np.arange(self.d)
-        blocks = np.searchsorted(self._block_keys, self._keys(nodes, nodes))
-        return self._positions(blocks)[:, within * self.d + within].ravel()
+        return self.diagonal_blocks(nodes)[:, within, within].ravel()
 
     def _layout(self, edge_blocks: np.ndarray, prior_blocks: np.ndarray) -> None:
         """Set the CSC ``indices``, the diagonal's positions, and where each stacked block and

@@ -13,7 +13,7 @@ from posegraph.problem.backends import available_backends, make_cholesky
 from posegraph.problem.cholesky import NotPositiveDefinite
 from posegraph.problem.factor_size import predicted_column_counts, predicted_flops
 from posegraph.problem.factors import linearize_between, linearize_priors
-from posegraph.problem.iterative import ConjugateGradients, _diagonal_block_positions
+from posegraph.problem.iterative import ConjugateGradients
 from posegraph.problem.linear import NormalEquations
 from posegraph.solvers import SolverOptions
 
@@ -107,20 +107,22 @@ def test_conjugate_gradients_solve_as_the_direct_factorisation_does(group):
 
 @pytest.mark.parametrize("group", [SE2, SE3])
 def test_the_preconditioner_takes_each_nodes_diagonal_block(group):
-    """Block Jacobi: the positions of H's d × d diagonal blocks in the CSC data, node by node;
-    the diagonal's where the blocks are not whole (a block size that does not divide H's); none
-    where the pattern lacks a diagonal entry."""
-    system, data, _ = _normal_matrix(random_graph(group, 30, 10, seed=6))
+    """Block Jacobi: the normal equations' layout says where H's d × d diagonal blocks sit in
+    the CSC data, node by node, and "cg" made for them solves as the direct factoriser does."""
+    system, data, gradient = _normal_matrix(random_graph(group, 30, 10, seed=6))
     d, n = group.dof, system.size
     dense = np.zeros((n, n))
     dense[system.indices, np.repeat(np.arange(n), np.diff(system.indptr))] = data
-    blocks = data[_diagonal_block_positions(system.indices, system.indptr, n, d)]
     expected = [dense[k : k + d, k : k + d] for k in range(0, n, d)]
-    np.testing.assert_array_equal(blocks, expected)
-    diagonal = data[_diagonal_block_positions(system.indices, system.indptr, n, n + 1)]
-    np.testing.assert_array_equal(diagonal.ravel(), np.diag(dense))
-    off_diagonal = np.ones(3, dtype=np.int64), np.array([0, 1, 2, 3])  # column 0 holds row 1
-    assert _diagonal_block_positions(*off_diagonal, 3, 1) is None
+    np.testing.assert_array_equal(data[system.diagonal_blocks()], expected)
+    solver = make_cholesky(
+        system.indices, system.indptr, n, "cg", diagonal_blocks=system.diagonal_blocks()
+    )
+    solver.factorize(data)
+    np.testing.assert_allclose(
+        solver.solve(-gradient), np.linalg.solve(dense, -gradient), rtol=1e-7
+    )
+    assert solver.direct is None  # conjugate gradients alone
 
 
 def test_a_matrix_that_is_not_positive_definite_falls_back_and_is_refused():
