@@ -70,9 +70,10 @@ def robust_solve(
 ) -> RobustOutcome:
     """A robust solve from the graph's values. ``standing``, GNC's decisions that stand (the
     measurements to keep), skips GNC's search; ``decisions``, the last GNC run's carried to this
-    graph, may start it, and without ``graduate`` only settle and search from there
-    (``gnc.gnc_tls``); without ``search``, GNC does not search locally. An IRLS kernel over the
-    between edges alone solves through ``warm_solve``."""
+    graph, may start it (``summary.reused`` says so), and without ``graduate`` only settle and
+    search from there (``gnc.gnc_tls``: decisions of the same call, which calibration passes on);
+    without ``search``, GNC does not search locally. An IRLS kernel over the between edges alone
+    solves through ``warm_solve``."""
     work = robust_problem(graph, kernel)
     reused: tuple[str, ...] = ()
     if kernel.spec.gnc:
@@ -88,7 +89,7 @@ def robust_solve(
             search=search,
         )
         result, rejected = outcome.result, outcome.rejected
-        if outcome.from_start:
+        if outcome.from_start and graduate:
             rejected_then = np.count_nonzero(~decisions)
             reused = (f"GNC's decisions ({rejected_then} rejected), {DECISIONS_AS_START}",)
         weights = np.ones(work.num_edges)

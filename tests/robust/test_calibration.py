@@ -16,6 +16,7 @@ from posegraph.graph import odometry_mask
 from posegraph.robust import calibration, noise
 from posegraph.robust.gnc import gnc_tls
 from posegraph.robust.kernels import default_width
+from posegraph.robust.run import DECISIONS_AS_START
 
 
 @pytest.fixture(scope="module")
@@ -78,6 +79,8 @@ def test_robust_mode_calibrates_where_the_information_hides_false_loops(simulate
     stages = [stage for stage, _ in itertools.groupby(r.stage for r in result.summary.iterations)]
     graduations = [i for i, stage in enumerate(stages) if stage == "gnc round 1 (chordal)"]
     assert len(graduations) == 3  # the first run's and two after a scaling
+    # The last solve starts from decisions of this call, not from an earlier call's.
+    assert not any(DECISIONS_AS_START in reuse for reuse in result.summary.reused)
     searched = {"re-admit", "drop"}
     assert searched & set(stages[: graduations[1]])  # the first run searched
     assert not searched & set(stages[graduations[1] : graduations[2]])  # the next did not
