@@ -21,7 +21,14 @@ from ..graph import EdgeSet, PoseGraph
 from ..init.choice import choose, initialize
 from ..lie import LieGroup
 from ..problem.factors import chi2
-from ..solvers import MAX_ITERATIONS, IterationRecord, Result, SolverOptions, Summary
+from ..solvers import (
+    GRADIENT_BELOW_TOLERANCE,
+    MAX_ITERATIONS,
+    IterationRecord,
+    Result,
+    SolverOptions,
+    Summary,
+)
 from .composition import compose_new_nodes
 from .marginal import DENSE_SIZE, GaussianPrior, Quadratic, marginalized, quadratic
 
@@ -134,7 +141,7 @@ class FixedLag:
             final_error=final,
             iterations=records,
             termination=termination,
-            converged=termination == CONVERGED,
+            converged=termination in (CONVERGED, GRADIENT_BELOW_TOLERANCE),
             phase_times={},
             total_time=time.perf_counter() - began,
             num_variables=free * graph.group.dof,
@@ -259,9 +266,11 @@ def _optimize(window: _Window, options: SolverOptions, began: float):
     """Levenberg-Marquardt over the window's tangents, as gtsam's ``BatchFixedLagSmoother``: each
     iteration linearises at the window's linearisation point and tries λ until the error falls
     (then λ ÷ 10) or λ passes ``MAX_DAMPING``. Stops after ``max_iterations``, when an
-    iteration lowers the error by no more than ``relative_decrease`` of it, or when the model
-    predicts no more than that for an iteration's first step (which is then not tried: near
-    the minimum, the actual decrease is round-off and every λ would be tried in vain)."""
+    iteration lowers the error by no more than ``relative_decrease`` of it, when the model
+    predicts no more than that for an iteration's first step, or when the model's gradient
+    falls below ``gradient_tolerance`` (as ``solve`` does; neither step is then tried: near
+    the minimum, or where the window fits its measurements exactly, the actual decrease is
+    round-off and every λ would be tried in vain)."""
     error = initial = window.error(window.delta)
     records, damping = [], INITIAL_DAMPING
     free = window.position >= 0
@@ -273,6 +282,8 @@ def _optimize(window: _Window, options: SolverOptions, began: float):
             window.linearization, window.edges, window.priors, window.position, window.prior
         )
         current = window.delta[free].reshape(-1)
+        if np.max(np.abs(model.hessian @ current - model.gradient)) < options.gradient_tolerance:
+            return records, GRADIENT_BELOW_TOLERANCE, initial, error
         previous = error
         first = True
         while True:

@@ -44,6 +44,7 @@ TIME_LIMIT = "time limit reached"
 MAX_ITERATIONS = "maximum iterations reached"
 PREDICTED_BELOW_TOLERANCE = "predicted error decrease below tolerance"
 STEP_BELOW_TOLERANCE = "step below tolerance"
+GRADIENT_BELOW_TOLERANCE = "gradient below tolerance"
 NOT_FINITE = "the error at the start is not finite (values or residuals beyond double precision)"
 
 
@@ -236,7 +237,7 @@ def _norm(array: np.ndarray) -> float:
 def _stop_before_step(options: SolverOptions, gradient: np.ndarray, clock: _Clock):
     """(termination, converged) where the run ends before proposing a step, else None."""
     if np.max(np.abs(gradient)) < options.gradient_tolerance:
-        return "gradient below tolerance", True
+        return GRADIENT_BELOW_TOLERANCE, True
     if options.time_limit is not None and clock.elapsed() > options.time_limit:
         return TIME_LIMIT, False
     return None

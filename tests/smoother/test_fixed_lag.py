@@ -12,6 +12,7 @@ import posegraph
 from posegraph import PoseGraph, Smoother, SolverOptions, optimize
 from posegraph.lie import SE2, SE3
 from posegraph.smoother.marginal import marginalized, quadratic
+from posegraph.solvers import GRADIENT_BELOW_TOLERANCE
 
 TIGHT = SolverOptions(relative_decrease=1e-14)
 
@@ -79,6 +80,21 @@ def test_marginalised_poses_keep_their_last_estimate():
     for k in range(full.num_nodes - 6):
         last = history[k + 6][k]  # the call that marginalised pose k
         assert np.array_equal(final.values[k].as_matrix(), last)
+
+
+@pytest.mark.parametrize("group", [SE2, SE3], ids=["SE2", "SE3"])
+def test_a_window_that_fits_exactly_tries_no_step(group):
+    """A prior and a chain of odometry, the new pose composed from the last: the window fits
+    every measurement to round-off, so the model's gradient is below ``gradient_tolerance``
+    and no λ is tried (each would fail on round-off)."""
+    full, _ = visual_odometry(group, poses=8, loop_share=0.0, seed=3)
+    summaries = []
+    streamed(full, lag=4, each=lambda k, graph, smoother: summaries.append(smoother.solution))
+    for solution in summaries[2:]:
+        summary = solution.summary
+        assert summary.final_error < 1e-20
+        assert summary.iterations == [] and summary.converged
+        assert summary.termination == GRADIENT_BELOW_TOLERANCE
 
 
 def test_the_schur_complement_keeps_the_marginal_of_the_kept_nodes():
