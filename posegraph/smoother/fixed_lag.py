@@ -268,9 +268,9 @@ def _optimize(window: _Window, options: SolverOptions, began: float):
     (then λ ÷ 10) or λ passes ``MAX_DAMPING``. Stops after ``max_iterations``, when an
     iteration lowers the error by no more than ``relative_decrease`` of it, when the model
     predicts no more than that for an iteration's first step, or when the model's gradient
-    falls below ``gradient_tolerance`` (as ``solve`` does; neither step is then tried: near
-    the minimum, or where the window fits its measurements exactly, the actual decrease is
-    round-off and every λ would be tried in vain)."""
+    falls below ``gradient_tolerance`` (as in ``solve``). In the last two cases no step is
+    tried: near the minimum, or where the window fits its measurements exactly, the actual
+    decrease is round-off and every λ would be tried in vain."""
     error = initial = window.error(window.delta)
     records, damping = [], INITIAL_DAMPING
     free = window.position >= 0
