@@ -7,7 +7,7 @@ import numpy as np
 from ..graph import PoseGraph, named_nodes
 from ..lie import LieGroup
 from ..problem.cholesky import NotPositiveDefinite
-from .chordal import Patterns, chordal_values, supports
+from .chordal import chordal_values, supports
 from .spanning_tree import align_to_priors, spanning_tree_values
 
 INITIALIZERS = ("auto", "file", "odometry", "spanning-tree", "chordal")
@@ -21,7 +21,7 @@ def choose(graph: PoseGraph) -> str:
     return "chordal" if loops > 0 and supports(graph.group) else "odometry"
 
 
-def initialize(graph: PoseGraph, method: str, patterns: Patterns | None = None) -> LieGroup:
+def initialize(graph: PoseGraph, method: str) -> LieGroup:
     """Initial values by ``method``: "file" (the graph's values), "odometry" (compose the chain
     i → i+1, bridging breaks through other edges), "spanning-tree" (compose along the most
     informative edges), "chordal" (``posegraph.init.chordal``) or "auto" (``choose``). The gauge
@@ -30,15 +30,14 @@ def initialize(graph: PoseGraph, method: str, patterns: Patterns | None = None) 
     Raises ``ValueError`` naming the nodes to which the measurements compose values beyond
     double precision (a Sim3 chain whose scales multiply past 1e308, say), or when chordal's
     linear systems cannot be factorised even with a ridge (information of a range beyond
-    double precision). ``patterns`` keeps chordal's patterns from one call to the next
-    (``chordal.Patterns``)."""
+    double precision)."""
     if method == "auto":
         method = choose(graph)
     if method == "file":
         return graph.values
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         try:
-            values = _composed_values(graph, method, patterns)
+            values = _composed_values(graph, method)
         except NotPositiveDefinite as error:
             largest = max(np.abs(graph.edges.information).max(initial=0.0), 1.0)
             raise ValueError(
@@ -56,10 +55,10 @@ def initialize(graph: PoseGraph, method: str, patterns: Patterns | None = None) 
     return values
 
 
-def _composed_values(graph: PoseGraph, method: str, patterns: Patterns | None) -> LieGroup:
+def _composed_values(graph: PoseGraph, method: str) -> LieGroup:
     """The values of ``initialize`` by a method other than "file" and "auto"."""
     if method == "chordal":
-        return align_to_priors(graph, chordal_values(graph, patterns))
+        return align_to_priors(graph, chordal_values(graph))
     held = np.zeros(graph.num_nodes, dtype=bool)
     held[graph.gauge_nodes()] = True
     prefer = {"odometry": "odometry", "spanning-tree": "information"}.get(method)

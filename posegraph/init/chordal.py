@@ -139,30 +139,8 @@ class _Relaxation:
         return np.where(unweighted.reshape((n,) + (1,) * (solved.ndim - 1)), start, solved)
 
 
-class Patterns:
-    """The block patterns of ``chordal_values``' linear systems for the last structure it was
-    given (the nodes, the edges' ends and the held nodes): graphs that differ only in their
-    measurements, information and values, as GNC's reweighted stages do, share them."""
-
-    def __init__(self) -> None:
-        self._relaxation: _Relaxation | None = None
-
-    def relaxation(self, n: int, i: np.ndarray, j: np.ndarray, held: np.ndarray) -> _Relaxation:
-        """The relaxation of this structure: the last one if it is the same, else a new one."""
-        last = self._relaxation
-        if last is None or not (
-            last.n == n
-            and np.array_equal(last.i, i)
-            and np.array_equal(last.j, j)
-            and np.array_equal(last.held, held)
-        ):
-            last = self._relaxation = _Relaxation(n, i, j, held, free_block_index(n, held))
-        return last
-
-
-def chordal_values(graph: PoseGraph, patterns: Patterns | None = None) -> LieGroup:
-    """Initial values of an SE2, SE3 or Sim3 graph by chordal relaxation (module docstring);
-    ``patterns`` keeps the linear systems' patterns for the next call on the same structure."""
+def chordal_values(graph: PoseGraph) -> LieGroup:
+    """Initial values of an SE2, SE3 or Sim3 graph by chordal relaxation (module docstring)."""
     group = graph.group
     if not supports(group):
         raise ValueError(
@@ -175,7 +153,7 @@ def chordal_values(graph: PoseGraph, patterns: Patterns | None = None) -> LieGro
     held_rotation, held_translation, held_scale = _split(group, held_values)
     start_rotation, start_translation, start_scale = _split(group, graph.values)
     n = graph.num_nodes
-    relaxation = (patterns or Patterns()).relaxation(n, edges.i, edges.j, held)
+    relaxation = _Relaxation(n, edges.i, edges.j, held, free_block_index(n, held))
     rotation = _rotations(relaxation, z, weight, held_rotation, start_rotation)
     scale = np.ones(n)
     if group is Sim3:

@@ -7,8 +7,10 @@ consistency pass and a local search.
 2. Repeat: weigh the edges by the TLS-GNC weights of their current residuals, solve the weighted
    problem, raise μ by 1.4; until the weights are binary. Edges of weight 0 are left out of the
    linear system (the random fill-in of false loops would dominate the cost).
-   Yang et al. solve every stage globally. Here a stage starts from the chordal relaxation of
-   the weighted problem, which does not depend on where the last stage stopped.
+   Yang et al. solve every stage globally. Here a stage whose support (the edges of weight
+   > 0) changed starts from the chordal relaxation of the weighted problem, which does not
+   depend on where the last stage stopped; a stage over the last one's support, whose weights
+   moved only within it, starts where that stage stopped.
 3. Consistency: from the chordal relaxation of the kept (outlier-free) edges, solve least
    squares as ``optimize`` would (a fresh start, with the caller's options), keep every edge
    with s ≤ c² at the solution, and repeat until the kept set no longer changes. This re-admits
@@ -48,7 +50,6 @@ import numpy as np
 
 from ..graph import PoseGraph
 from ..init.choice import initialize
-from ..init.chordal import Patterns
 from ..problem.factors import between_squares
 from ..problem.linear import NormalEquations
 from ..solvers import (
@@ -93,7 +94,8 @@ class GncOutcome:
 
 def _stages(graph, mask, width_sq, options, start: Result, run: Run):
     """GNC rounds from the least-squares solution ``start``, each solved from the chordal
-    relaxation of its weighted problem; returns (result, weights)."""
+    relaxation of its weighted problem, or from the last round's solution where the support is
+    that round's; returns (result, weights)."""
     stage_options = dataclasses.replace(
         options,
         max_iterations=min(options.max_iterations, STAGE_ITERATIONS),
@@ -106,7 +108,7 @@ def _stages(graph, mask, width_sq, options, start: Result, run: Run):
     if not over.any():
         return result, weights
     mu = np.min(width_sq[over] / (2.0 * s[over] - width_sq[over]))
-    active, system, patterns = None, None, Patterns()
+    active, system = None, None
     while rounds < MAX_ROUNDS:
         rounds += 1
         run.rounds += 1
@@ -116,8 +118,11 @@ def _stages(graph, mask, width_sq, options, start: Result, run: Run):
         if active is None or not np.array_equal(now_active, active):
             active = now_active
             system = NormalEquations(work, work.gauge_nodes(), options.linear_solver)
-        work.set_values(initialize(work, "chordal", patterns), check=False)
-        label = f"gnc round {rounds} (chordal)"
+            work.set_values(initialize(work, "chordal"), check=False)
+            label = f"gnc round {rounds} (chordal)"
+        else:
+            work.set_values(result.values, check=False)
+            label = f"gnc round {rounds}"
         result = run.solve(work, stage_options, label, system=system)
         s = between_squares(result.values, graph.edges)
         if rounds > 1 and np.all((weights[mask] < 1e-6) | (weights[mask] > 1.0 - 1e-6)):

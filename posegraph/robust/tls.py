@@ -12,6 +12,7 @@ from ..graph import PoseGraph
 from ..init.choice import initialize
 from ..lie import LieGroup
 from ..problem.factors import between_squares, prior_squares
+from ..problem.linear import NormalEquations
 from ..solvers import (
     STOPPED,
     TIME_LIMIT,
@@ -45,7 +46,10 @@ class Run:
     from the run's start and labelled by stage, their phase times summed. The options' time
     limit is the run's. When the callback asks to stop or the time is up, the solve under way
     ends and ``Stopped`` carries it out. ``options`` are the caller's, which solves from a
-    fresh start use (``settle``)."""
+    fresh start use (``settle``). A solve over the same structure as the last one (the same
+    edges' ends, priors and held nodes: a settling pass that kept what it was given, the final
+    solve after the search) reuses its normal equations: their pattern and CHOLMOD's symbolic
+    analysis."""
 
     def __init__(self, callback: Callback | None, options: SolverOptions) -> None:
         self.callback = callback
@@ -54,6 +58,7 @@ class Run:
         self.history: list[IterationRecord] = []
         self.phase_times: dict[str, float] = {}
         self.rounds = 0
+        self._last_system: NormalEquations | None = None
 
     def solve(self, graph: PoseGraph, options: SolverOptions, stage: str, system=None) -> Result:
         def report(record: IterationRecord) -> bool:
@@ -69,7 +74,14 @@ class Run:
         if options.time_limit is not None:
             left = max(options.time_limit - (time.perf_counter() - self.start), 0.0)
             options = dataclasses.replace(options, time_limit=left)
-        result = solve(graph, options, report, system=system)
+        last = self._last_system
+        own = system is None and last is not None and last.describes(graph, graph.gauge_nodes())
+        result = solve(graph, options, report, system=last if own else system)
+        if own:  # within one call: nothing a warm start reused (``Summary.reused``)
+            result = dataclasses.replace(
+                result, summary=dataclasses.replace(result.summary, reused=())
+            )
+        self._last_system = result.system
         for phase, seconds in result.summary.phase_times.items():
             self.phase_times[phase] = self.phase_times.get(phase, 0.0) + seconds
         if result.summary.termination in (STOPPED, TIME_LIMIT):

@@ -13,7 +13,7 @@ from posegraph_datasets.generators import manhattan_world, sphere
 import posegraph
 from posegraph.graph import PoseGraph
 from posegraph.init.choice import choose, initialize
-from posegraph.init.chordal import Patterns, chordal_values
+from posegraph.init.chordal import chordal_values
 from posegraph.lie import SE2, SE3, Sim3
 
 from ..conftest import (
@@ -43,25 +43,6 @@ def test_chordal_recovers_noise_free_poses_exactly(generate):
     exact.set_values(graph.values.set_at(0, truth[0]))  # the held node at its true value
     values = chordal_values(exact)
     np.testing.assert_allclose(values.as_matrix(), truth.as_matrix(), atol=1e-8)
-
-
-def test_chordal_patterns_serve_reweighted_graphs_and_are_rebuilt_for_another_structure():
-    """``Patterns`` hands the same relaxation to graphs of one structure whose information
-    differs (GNC's reweighted stages), with values equal to a fresh relaxation's, and a new one
-    once an edge is left out."""
-    graph, _ = manhattan_world(num_poses=60, seed=3)
-    weights = np.random.default_rng(0).uniform(0.1, 1.0, graph.num_edges)
-    patterns = Patterns()
-    chordal_values(graph, patterns)
-    first = patterns._relaxation
-    reweighted = chordal_values(graph.weighted(weights), patterns)
-    assert patterns._relaxation is first
-    fresh = chordal_values(graph.weighted(weights))
-    np.testing.assert_allclose(reweighted.as_matrix(), fresh.as_matrix(), atol=1e-12)
-    weights[-1] = 0.0  # the last edge (a loop closure) left out
-    chordal_values(graph.weighted(weights), patterns)
-    assert patterns._relaxation is not first
-    assert patterns._relaxation.i.size == graph.num_edges - 1
 
 
 @pytest.mark.parametrize("group", [SE3, Sim3], ids=lambda g: g.__name__)

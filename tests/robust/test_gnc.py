@@ -115,7 +115,7 @@ def test_gnc_settles_from_its_values_too_where_chordal_lands_in_a_worse_basin(mo
     city, _ = manhattan_world(num_poses=100, seed=2)
     rng = np.random.default_rng(0)
 
-    def random_headings(graph, method, patterns=None):
+    def random_headings(graph, method):
         count = graph.num_nodes
         turns = np.column_stack([np.zeros((count, 2)), rng.uniform(-np.pi, np.pi, count)])
         return graph.values.retract(turns)
@@ -418,6 +418,53 @@ def test_a_gnc_run_reports_every_solve_and_stops_when_asked():
     loops = robust_mask(corrupted, "loops")
     width_sq = default_width(3, gnc_quantile(int(loops.sum()))) ** 2
     assert stopped.summary.rejected_edges == np.flatnonzero(loops & (s > width_sq)).tolist()
+
+
+def test_gnc_rounds_start_from_chordal_where_their_support_changed_else_where_the_last_stopped(
+    monkeypatch,
+):
+    """A GNC round whose support (the edges of weight > 0) is the round before's starts where
+    that round stopped; a round whose support changed starts from the chordal relaxation of
+    its weighted problem, and so does the first."""
+    graph, _ = manhattan_world(num_poses=300, seed=67)
+    corrupted, _ = add_false_loops(graph, 0.3, seed=2)
+    supports, starts = [], []
+    weights_of = gnc.tls_gnc_weights
+
+    def recording(s, width_sq, mu):
+        weights = weights_of(s, width_sq, mu)
+        supports.append(weights > 0)
+        return weights
+
+    def first_of_each_round(record):
+        if record.stage.startswith("gnc round") and len(starts) < len(supports):
+            starts.append(record.stage)
+
+    monkeypatch.setattr(gnc, "tls_gnc_weights", recording)
+    posegraph.optimize(corrupted.copy(), robust="gnc", callback=first_of_each_round)
+    assert len(starts) == len(supports) > 2
+    changed = [True] + [
+        not np.array_equal(a, b) for a, b in zip(supports[:-1], supports[1:], strict=True)
+    ]
+    assert [stage.endswith("(chordal)") for stage in starts] == changed
+    assert not all(changed)
+
+
+def test_a_gnc_run_reuses_the_normal_equations_of_a_solve_over_the_same_structure():
+    """GNC's solves share the last one's pattern and symbolic analysis where the structure is
+    the same, and build their own where it is not; within one call, nothing is reported as
+    reused (``Summary.reused`` is what a warm start reused)."""
+    graph, _ = manhattan_world(num_poses=60, seed=3)
+    options = posegraph.SolverOptions()
+    run = tls.Run(None, options)
+    first = run.solve(graph.copy(), options, "first")
+    again = run.solve(graph.copy(), options, "again")
+    assert again.system is first.system and again.summary.reused == ()
+    fewer = graph.with_edges(np.arange(graph.num_edges) != graph.num_edges - 1)
+    other = run.solve(fewer, options, "fewer edges")
+    assert other.system is not first.system
+    assert other.system.size == first.system.size
+    assert again.summary.final_error == pytest.approx(first.summary.final_error, rel=1e-9)
 
 
 def test_gnc_ends_its_search_where_the_information_cannot_be_factorised():
