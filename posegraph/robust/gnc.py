@@ -122,7 +122,7 @@ def _stages(graph, mask, width_sq, options, start: Result, run: Run):
             label = f"gnc round {rounds} (chordal)"
         else:
             work.set_values(result.values, check=False)
-            label = f"gnc round {rounds}"
+            label = f"gnc round {rounds} (warm)"
         result = run.solve(work, stage_options, label, system=system)
         s = between_squares(result.values, graph.edges)
         if rounds > 1 and np.all((weights[mask] < 1e-6) | (weights[mask] > 1.0 - 1e-6)):
