@@ -51,7 +51,6 @@ import numpy as np
 from ..graph import PoseGraph
 from ..init.choice import initialize
 from ..problem.factors import between_squares
-from ..problem.linear import NormalEquations
 from ..solvers import (
     Callback,
     Result,
@@ -108,7 +107,7 @@ def _stages(graph, mask, width_sq, options, start: Result, run: Run):
     if not over.any():
         return result, weights
     mu = np.min(width_sq[over] / (2.0 * s[over] - width_sq[over]))
-    active, system = None, None
+    active = None
     while rounds < MAX_ROUNDS:
         rounds += 1
         run.rounds += 1
@@ -117,13 +116,12 @@ def _stages(graph, mask, width_sq, options, start: Result, run: Run):
         work = graph.weighted(weights)
         if active is None or not np.array_equal(now_active, active):
             active = now_active
-            system = NormalEquations(work, work.gauge_nodes(), options.linear_solver)
             work.set_values(initialize(work, "chordal"), check=False)
             label = f"gnc round {rounds} (chordal)"
         else:
             work.set_values(result.values, check=False)
             label = f"gnc round {rounds} (warm)"
-        result = run.solve(work, stage_options, label, system=system)
+        result = run.solve(work, stage_options, label)  # over one support: one system
         s = between_squares(result.values, graph.edges)
         if rounds > 1 and np.all((weights[mask] < 1e-6) | (weights[mask] > 1.0 - 1e-6)):
             break

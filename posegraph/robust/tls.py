@@ -47,9 +47,9 @@ class Run:
     limit is the run's. When the callback asks to stop or the time is up, the solve under way
     ends and ``Stopped`` carries it out. ``options`` are the caller's, which solves from a
     fresh start use (``settle``). A solve over the same structure as the last one (the same
-    edges' ends, priors and held nodes: a settling pass that kept what it was given, the final
-    solve after the search) reuses its normal equations: their pattern and CHOLMOD's symbolic
-    analysis."""
+    edges' ends, priors and held nodes: GNC's rounds over one support, a settling pass that
+    kept what it was given, the final solve after the search) reuses its normal equations:
+    their pattern and CHOLMOD's symbolic analysis."""
 
     def __init__(self, callback: Callback | None, options: SolverOptions) -> None:
         self.callback = callback
@@ -60,7 +60,7 @@ class Run:
         self.rounds = 0
         self._last_system: NormalEquations | None = None
 
-    def solve(self, graph: PoseGraph, options: SolverOptions, stage: str, system=None) -> Result:
+    def solve(self, graph: PoseGraph, options: SolverOptions, stage: str) -> Result:
         def report(record: IterationRecord) -> bool:
             record = dataclasses.replace(
                 record,
@@ -75,9 +75,9 @@ class Run:
             left = max(options.time_limit - (time.perf_counter() - self.start), 0.0)
             options = dataclasses.replace(options, time_limit=left)
         last = self._last_system
-        own = system is None and last is not None and last.describes(graph, graph.gauge_nodes())
-        result = solve(graph, options, report, system=last if own else system)
-        if own:  # within one call: nothing a warm start reused (``Summary.reused``)
+        shared = last is not None and last.describes(graph, graph.gauge_nodes())
+        result = solve(graph, options, report, system=last if shared else None)
+        if shared:  # within one call: nothing a warm start reused (``Summary.reused``)
             result = dataclasses.replace(
                 result, summary=dataclasses.replace(result.summary, reused=())
             )

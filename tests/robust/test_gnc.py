@@ -290,9 +290,9 @@ def test_gnc_readmits_true_loops_just_outside_the_width_that_fit_only_together(
     # nothing is re-admitted, and nothing is settled.
     solve, stages = tls.Run.solve, []
 
-    def unconverged_readmission(self, graph, options, stage, system=None):
+    def unconverged_readmission(self, graph, options, stage):
         stages.append((stage, options.max_iterations))
-        result = solve(self, graph, options, stage, system)
+        result = solve(self, graph, options, stage)
         if stage != "re-admit":
             return result
         return dataclasses.replace(
