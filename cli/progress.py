@@ -24,7 +24,7 @@ with fixed weights (each GNC stage's, or one of its least-squares solves over a 
 
 
 _ROUND = re.compile(r"(?P<name>.+) round (?P<round>\d+) \((?P<start>.+)\)")
-"""A GNC round's stage label: "gnc round 3 (chordal)"."""
+"""A GNC round's stage label: "gnc round 3 (chordal)", "gnc round 12 (warm)"."""
 
 
 class Progress:
@@ -130,7 +130,8 @@ class Progress:
 
     def __call__(self, record: IterationRecord) -> bool:
         """The solver callback: the record's stage line, updated; True once Ctrl-C was
-        pressed. GNC's rounds share a line ("gnc (chordal)"), which shows the round."""
+        pressed. GNC's rounds share a line per start ("gnc (chordal)", "gnc (warm)"), which
+        shows the round."""
         match = _ROUND.fullmatch(record.stage)
         stage = f"{match['name']} ({match['start']})" if match else record.stage or "iterating"
         if stage != self._stage:
