@@ -29,6 +29,10 @@ RELATIVE_RESIDUAL = 1e-10
 conditioned system, so that a solver's steps and decisions do not change."""
 MAX_ITERATIONS = 3000
 """Iterations before a solve falls back to the direct factoriser."""
+FEW_COLUMNS = 3
+"""Right-hand sides of up to this many columns (the chordal relaxation's d rows of the
+rotations) are solved column by column; more (leverage's probes) by the direct factoriser,
+which a filling factor makes cost some twenty conjugate-gradient solves (docs/benchmarks.md)."""
 
 
 class ConjugateGradients:
@@ -64,17 +68,21 @@ class ConjugateGradients:
         self._data, self._factorised = data, False
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
-        """Solve for a vector (n,) or (n, 1) by conjugate gradients; for (n, k) columns, k > 1
-        (leverage's probes), by the direct factoriser, whose factorisation costs a few
-        conjugate-gradient solves where this backend is chosen, and each column after it two
-        triangular solves."""
+        """Solve for a vector (n,) or for (n, k) columns by conjugate gradients, column by
+        column, up to ``FEW_COLUMNS``; more columns (leverage's probes) by the direct
+        factoriser, whose factorisation serves them all (each column after it two triangular
+        solves), as does a solve that does not converge."""
         rhs = np.asarray(rhs, dtype=float)
-        if self._factorised or rhs.size > self.size:
+        columns = rhs.reshape(self.size, -1).T
+        if self._factorised or len(columns) > FEW_COLUMNS:
             return self._factor().solve(rhs)
-        solution = self._iterate(rhs.ravel())
-        if solution is None:
-            return self._factor().solve(rhs)
-        return solution.reshape(rhs.shape)
+        solutions = []
+        for column in columns:
+            solution = self._iterate(column)
+            if solution is None:
+                return self._factor().solve(rhs)
+            solutions.append(solution)
+        return np.stack(solutions, axis=1).reshape(rhs.shape)
 
     def inverse_form(
         self, rows: np.ndarray, columns: np.ndarray, values: np.ndarray, count: int

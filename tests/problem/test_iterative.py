@@ -13,7 +13,7 @@ from posegraph.problem.backends import available_backends, make_cholesky
 from posegraph.problem.cholesky import NotPositiveDefinite
 from posegraph.problem.factor_size import predicted_column_counts, predicted_flops
 from posegraph.problem.factors import linearize_between, linearize_priors
-from posegraph.problem.iterative import ConjugateGradients
+from posegraph.problem.iterative import FEW_COLUMNS, ConjugateGradients
 from posegraph.problem.linear import NormalEquations
 from posegraph.solvers import SolverOptions
 
@@ -99,10 +99,12 @@ def test_conjugate_gradients_solve_as_the_direct_factorisation_does(group):
     np.testing.assert_allclose(
         iterative_solver.solve(column), direct.solve(column), rtol=1e-7, atol=1e-9
     )
+    two = np.stack([-gradient, gradient + 1.0], axis=1)  # a few columns: one by one
+    np.testing.assert_allclose(iterative_solver.solve(two), direct.solve(two), rtol=1e-7, atol=1e-9)
     assert not made  # conjugate gradients alone
-    two = np.stack([-gradient, gradient + 1.0], axis=1)  # several columns: the factor serves
-    np.testing.assert_allclose(iterative_solver.solve(two), direct.solve(two), rtol=1e-9)
-    assert len(made) == 1
+    many = np.stack([gradient * k for k in range(1, FEW_COLUMNS + 2)], axis=1)
+    np.testing.assert_allclose(iterative_solver.solve(many), direct.solve(many), rtol=1e-9)
+    assert len(made) == 1  # more columns: the factor serves
 
 
 @pytest.mark.parametrize("group", [SE2, SE3])
