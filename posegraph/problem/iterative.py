@@ -73,16 +73,13 @@ class ConjugateGradients:
         factoriser, whose factorisation serves them all (each column after it two triangular
         solves), as does a solve that does not converge."""
         rhs = np.asarray(rhs, dtype=float)
-        columns = rhs.reshape(self.size, -1).T
-        if self._factorised or len(columns) > FEW_COLUMNS:
+        columns = rhs.reshape(self.size, -1)
+        if self._factorised or columns.shape[1] > FEW_COLUMNS:
             return self._factor().solve(rhs)
-        solutions = []
-        for column in columns:
-            solution = self._iterate(column)
-            if solution is None:
-                return self._factor().solve(rhs)
-            solutions.append(solution)
-        return np.stack(solutions, axis=1).reshape(rhs.shape)
+        solution = self._iterate(columns)
+        if solution is None:
+            return self._factor().solve(rhs)
+        return solution.reshape(rhs.shape)
 
     def inverse_form(
         self, rows: np.ndarray, columns: np.ndarray, values: np.ndarray, count: int
@@ -92,8 +89,9 @@ class ConjugateGradients:
         return self._factor().inverse_form(rows, columns, values, count)
 
     def _iterate(self, b: np.ndarray) -> np.ndarray | None:
-        """The preconditioned conjugate-gradient solution of A x = b, or None where it does not
-        converge (or a diagonal block is not positive definite: nor is A)."""
+        """The preconditioned conjugate-gradient solution X of A X = B for (n, k) columns B,
+        one column at a time, or None where one does not converge (or a diagonal block is not
+        positive definite: nor is A)."""
         import scipy.sparse
         import scipy.sparse.linalg
 
@@ -112,10 +110,20 @@ class ConjugateGradients:
             (np.linalg.inv(blocks), np.arange(count), np.arange(count + 1)),
             shape=(self.size, self.size),
         )
-        x, info = scipy.sparse.linalg.cg(
-            matrix, b, rtol=RELATIVE_RESIDUAL, atol=0.0, maxiter=MAX_ITERATIONS, M=preconditioner
-        )
-        return x if info == 0 and np.all(np.isfinite(x)) else None
+        solution = np.empty_like(b)
+        for k, column in enumerate(b.T):
+            x, info = scipy.sparse.linalg.cg(
+                matrix,
+                column,
+                rtol=RELATIVE_RESIDUAL,
+                atol=0.0,
+                maxiter=MAX_ITERATIONS,
+                M=preconditioner,
+            )
+            if info != 0 or not np.all(np.isfinite(x)):
+                return None
+            solution[:, k] = x
+        return solution
 
     def _factor(self):
         """The direct factoriser, factorising the kept matrix (``NotPositiveDefinite`` if it is
