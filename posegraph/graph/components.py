@@ -24,9 +24,15 @@ def connected_components(count: int, i: np.ndarray, j: np.ndarray) -> np.ndarray
         if not apart.any():
             break
         np.minimum.at(root, high[apart], low[apart])  # roots only: root[r] = r ≥ any low
-        while True:
-            jumped = root[root]
-            if np.array_equal(jumped, root):
-                break
-            root = jumped
+        root = roots(root)
     return np.unique(root, return_inverse=True)[1].reshape(count)
+
+
+def roots(pointer: np.ndarray) -> np.ndarray:
+    """Each node's root in the forest where node k points at ``pointer[k]`` (a root at itself),
+    by pointer jumping."""
+    while True:
+        jumped = pointer[pointer]
+        if np.array_equal(jumped, pointer):
+            return pointer
+        pointer = jumped

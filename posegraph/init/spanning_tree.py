@@ -14,6 +14,7 @@ from collections.abc import Callable
 import numpy as np
 
 from ..graph import PoseGraph, odometry_mask
+from ..graph.spanning_forest import minimum_spanning_forest, rooted
 from ..lie import LieGroup
 from ..trajectory.alignment import similarity_fits
 
@@ -135,12 +136,7 @@ def spanning_tree(
     if graph.num_edges == 0:  # every node hangs from the root: no tree to search
         none = np.zeros(0, dtype=np.int64)
         return SpanningTree(np.full(n + 1, n), none, none, np.zeros(0, dtype=bool))
-    import scipy.sparse.csgraph  # on use: an SE2 or SE3 chordal start does without scipy
-
     known = np.zeros(n, dtype=bool) if known is None else np.asarray(known, dtype=bool)
-    i, j = graph.edges.i, graph.edges.j
-    weights = edge_weights(graph, prefer)
-
     first_of_component = graph.component_roots()
     root = n
     anchors = np.concatenate([np.flatnonzero(known), first_of_component])
@@ -150,23 +146,14 @@ def spanning_tree(
             np.full(first_of_component.size, _COMPONENT_ROOT_WEIGHT),
         ]
     )
-    rows = np.concatenate([np.minimum(i, j), anchors])
-    cols = np.concatenate([np.maximum(i, j), np.full(anchors.size, root)])
-    all_weights = np.concatenate([weights, anchor_weights])
-    # Keep the lightest edge of each pair before the spanning tree (duplicates would be summed).
-    keep = np.lexsort((all_weights, cols, rows))
-    pair = rows[keep] * (n + 1) + cols[keep]
-    keep = keep[np.diff(pair, prepend=-1) != 0]
-    adjacency = scipy.sparse.coo_matrix(
-        (all_weights[keep], (rows[keep], cols[keep])), shape=(n + 1, n + 1)
-    ).tocsr()
-    tree = scipy.sparse.csgraph.minimum_spanning_tree(adjacency)
-    _, parent = scipy.sparse.csgraph.breadth_first_order(tree, root, directed=False)
-    parent = parent.astype(np.int64)  # scipy's int32 would overflow in parent · n + child
-    parent[root] = root
+    i = np.concatenate([graph.edges.i, anchors])
+    j = np.concatenate([graph.edges.j, np.full(anchors.size, root)])
+    weights = np.concatenate([edge_weights(graph, prefer), anchor_weights])
+    tree = minimum_spanning_forest(n + 1, i, j, weights)
+    parent, edge = rooted(n + 1, i[tree], j[tree], root)
     children = np.flatnonzero(parent[:n] != root)
-    edge, reversed_ = _tree_edges(graph, parent[children], children)
-    return SpanningTree(parent, children, edge, reversed_)
+    edge = tree[edge[children]]
+    return SpanningTree(parent, children, edge, graph.edges.i[edge] == children)
 
 
 def spanning_tree_values(
@@ -191,23 +178,6 @@ def spanning_tree_values(
         .set_at(tree.children, along)
     )
     return tree.accumulated(offsets, lambda above, below: above @ below)[:n]
-
-
-def _tree_edges(
-    graph: PoseGraph, parents: np.ndarray, children: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """An edge joining each parent and child, and whether it runs child → parent."""
-    n = graph.num_nodes
-    i, j = graph.edges.i, graph.edges.j
-    forward_keys = i * n + j
-    backward_keys = j * n + i
-    wanted = parents * n + children
-    order_f, order_b = np.argsort(forward_keys), np.argsort(backward_keys)
-    pos_f = np.clip(np.searchsorted(forward_keys, wanted, sorter=order_f), 0, len(i) - 1)
-    pos_b = np.clip(np.searchsorted(backward_keys, wanted, sorter=order_b), 0, len(i) - 1)
-    edge_f, edge_b = order_f[pos_f], order_b[pos_b]
-    reversed_ = forward_keys[edge_f] != wanted
-    return np.where(reversed_, edge_b, edge_f), reversed_
 
 
 def compose_missing_values(graph: PoseGraph) -> None:
