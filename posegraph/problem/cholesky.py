@@ -1,8 +1,9 @@
 """Sparse Cholesky backends for a fixed sparsity pattern: analyse once, factorise many times.
 
-* ``cholmod``: SuiteSparse CHOLMOD through the cvxopt wheel (supernodal, AMD ordering), given
-  the lower triangle; the faster of the two. Covariances of many columns by selected inversion
-  of its factor.
+* ``cholmod``: SuiteSparse CHOLMOD through the cvxopt wheel (AMD ordering; supernodal LLᵀ, or
+  simplicial LDLᵀ where CHOLMOD finds the factor too sparse for supernodes), given the lower
+  triangle; the faster of the two. Covariances of many columns by selected inversion of its
+  supernodal factor.
 * ``scipy``: SuperLU in symmetric mode with a minimum-degree ordering computed once and reused
   (``permc_spec="NATURAL"`` on the pre-permuted matrix). Pure scipy, always available.
 
@@ -26,6 +27,9 @@ from .selected_inversion import SupernodalFactor, inverse_blocks
 
 if TYPE_CHECKING:
     import scipy.sparse
+
+SIMPLICIAL, AUTO, SUPERNODAL = 0, 1, 2
+"""cvxopt's values of CHOLMOD's ``supernodal`` option (``CHOLMOD_SIMPLICIAL`` …)."""
 
 SOLVED_COLUMNS = 96
 """CHOLMOD's covariance blocks of up to this many columns in all come from solves, beyond from
@@ -123,8 +127,8 @@ class CholmodCholesky:
         previous: CholmodCholesky | None = None,
         appended: Appended | None = None,
     ) -> None:
-        """``supernodal`` forces an LLᵀ factor (CHOLMOD may otherwise pick LDLᵀ), which
-        ``covariance_blocks`` needs. ``previous`` is a factoriser for a leading part of this
+        """``supernodal`` forces an LLᵀ factor (CHOLMOD may otherwise pick LDLᵀ: ``_analyse``),
+        which ``covariance_blocks`` needs. ``previous`` is a factoriser for a leading part of this
         pattern, or for the same one (see ``_lower_pattern``); ``appended`` says how this
         pattern extends it, where known."""
         cholmod = import_cholmod()
@@ -149,11 +153,13 @@ class CholmodCholesky:
         self._factor = self._analyse()
 
     def _analyse(self):
-        """CHOLMOD's symbolic factorisation of the pattern (supernodal if asked for)."""
+        """CHOLMOD's symbolic factorisation of the pattern: supernodal LLᵀ if asked for, else
+        CHOLMOD's own choice (``CHOLMOD_AUTO``: simplicial LDLᵀ below 40 flops per entry of L,
+        where a supernode's dense kernels cost more than they save; cvxopt asks for
+        supernodal always unless told)."""
         cholmod = self._cholmod
         saved = dict(cholmod.options)
-        if self._supernodal:
-            cholmod.options["supernodal"] = 2
+        cholmod.options["supernodal"] = SUPERNODAL if self._supernodal else AUTO
         try:
             return cholmod.symbolic(self._a)
         finally:
@@ -202,6 +208,9 @@ class CholmodCholesky:
             self._cholmod.numeric(self._a, self._factor)
         except ArithmeticError as error:
             raise NotPositiveDefinite(str(error)) from None
+        # LDLᵀ factorises indefinite matrices too, LLᵀ does not. A denormal d > 0 gives 1/d = ∞.
+        if not self._is_supernodal() and not np.all(self._d_inverse() > 0):
+            raise NotPositiveDefinite("a pivot ≤ 0 in CHOLMOD's LDLᵀ factorisation")
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """Solve for a vector (n,) or for every column of (n, k) at once."""
@@ -275,15 +284,26 @@ class CholmodCholesky:
 
     def pivots(self) -> np.ndarray:
         """Per column of A, its pivot in the last factorisation (``pivots``): L's diagonal
-        squared for a supernodal factor (P A Pᵀ = L Lᵀ, with cvxopt's default options), D for
-        a simplicial one (L D Lᵀ, where they ask for it)."""
-        try:
+        squared for a supernodal factor (P A Pᵀ = L Lᵀ), D for a simplicial one (L D Lᵀ)."""
+        if self._is_supernodal():
             in_factor = np.array(self._cholmod.diag(self._factor)).ravel() ** 2
-        except ValueError:  # not supernodal: D⁻¹ 1 gives 1/D
-            inverse = self._matrix(1.0, (self.size, 1))
-            self._cholmod.solve(self._factor, inverse, sys=6)
-            in_factor = 1.0 / np.array(inverse).ravel()
+        else:
+            in_factor = 1.0 / self._d_inverse()
         return in_factor[self._places()]
+
+    def _is_supernodal(self) -> bool:
+        """Whether CHOLMOD's factor is supernodal LLᵀ (``diag`` reads only those), not LDLᵀ."""
+        try:
+            self._cholmod.diag(self._factor)
+        except ValueError:
+            return False
+        return True
+
+    def _d_inverse(self) -> np.ndarray:
+        """D⁻¹ 1 of a simplicial P A Pᵀ = L D Lᵀ, in factor order."""
+        inverse = self._matrix(1.0, (self.size, 1))
+        self._cholmod.solve(self._factor, inverse, sys=6)
+        return np.array(inverse).ravel()
 
     @staticmethod
     def _compressed(matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -8,8 +8,16 @@ import scipy.sparse
 import scipy.sparse.linalg
 from posegraph_datasets.generators import docked, sphere
 
+import posegraph.problem.cholesky
 from posegraph.problem.backends import available_backends, make_cholesky
-from posegraph.problem.cholesky import NotPositiveDefinite, builds_transposed, ones_at
+from posegraph.problem.cholesky import (
+    AUTO,
+    SIMPLICIAL,
+    SUPERNODAL,
+    NotPositiveDefinite,
+    builds_transposed,
+    ones_at,
+)
 from posegraph.problem.factors import linearize_between, linearize_priors
 from posegraph.problem.linear import NormalEquations
 
@@ -84,6 +92,22 @@ def test_indefinite_matrix_is_reported(backend):
         system.factorize(data, np.full(system.size, -1e9))
 
 
+@pytest.mark.parametrize("mode", [SIMPLICIAL, AUTO, SUPERNODAL])
+def test_cholmod_refuses_an_indefinite_matrix_whatever_its_factor(mode, monkeypatch):
+    """LDLᵀ without pivoting factorises [[1, 2], [2, 1]] (D = 1, −3); the factoriser refuses it
+    as LLᵀ does, and factorises the definite [[2, 1], [1, 2]]."""
+    if "cholmod" not in available_backends():
+        pytest.skip("cvxopt is not installed here")
+    monkeypatch.setattr(posegraph.problem.cholesky, "AUTO", mode)
+    indptr, indices = np.array([0, 2, 4]), np.array([0, 1, 0, 1])
+    cholesky = make_cholesky(indices, indptr, 2, "cholmod")
+    with pytest.raises(NotPositiveDefinite):
+        cholesky.factorize(np.array([1.0, 2.0, 2.0, 1.0]))
+    cholesky.factorize(np.array([2.0, 1.0, 1.0, 2.0]))
+    np.testing.assert_allclose(cholesky.solve(np.array([3.0, 3.0])), [1.0, 1.0])
+    np.testing.assert_allclose(np.sort(cholesky.pivots()), [1.5, 2.0])
+
+
 @pytest.mark.parametrize(
     "backend, factor",
     [("cholmod", "simplicial"), ("cholmod", "supernodal"), ("scipy", "LU")],
@@ -94,13 +118,12 @@ def test_pivots_are_each_columns_schur_complement_where_it_is_eliminated(
     """A random sparse SPD matrix whose diagonal spans 1e-6 to 1e6: the pivots' product is
     det A, and each pivot lies between 1/(A⁻¹)ⱼⱼ (column j eliminated last) and Aⱼⱼ (first),
     which a pivot given to the wrong column would miss. CHOLMOD's factor is supernodal (LLᵀ)
-    with cvxopt's default options, simplicial (LDLᵀ) where they ask for it."""
+    or simplicial (LDLᵀ), as its analysis is told."""
     if backend not in available_backends():
         pytest.skip(f"{backend} is not installed here")
-    if factor == "simplicial":
-        from cvxopt import cholmod
-
-        monkeypatch.setitem(cholmod.options, "supernodal", 0)
+    mode = {"simplicial": SIMPLICIAL, "supernodal": SUPERNODAL}.get(factor)
+    if mode is not None:
+        monkeypatch.setattr(posegraph.problem.cholesky, "AUTO", mode)
     size = 300
     rng = np.random.default_rng(76)
     root = scipy.sparse.random(size, size, density=0.01, random_state=77) + scipy.sparse.eye(size)
@@ -110,6 +133,8 @@ def test_pivots_are_each_columns_schur_complement_where_it_is_eliminated(
     cholesky = make_cholesky(matrix.indices, matrix.indptr, size, backend)
     cholesky.factorize(matrix.data)
     pivots = cholesky.pivots()
+    if mode is not None:
+        assert cholesky._is_supernodal() == (mode == SUPERNODAL)
     dense = matrix.toarray()
     assert np.log(pivots).sum() == pytest.approx(np.linalg.slogdet(dense)[1], abs=1e-9)
     lowest, highest = 1.0 / np.diag(np.linalg.inv(dense)), np.diag(dense)

@@ -58,9 +58,10 @@ def test_a_lag_longer_than_the_stream_reaches_the_batch_optimum(group):
 @pytest.mark.parametrize("group", [SE2, SE3], ids=["SE2", "SE3"])
 def test_marginalisation_is_exact_where_the_problem_is_linear(group):
     """With noise of 1e-5 the measurements are nearly linear in the poses; the newest pose of
-    each call then equals the batch solution of everything streamed so far (to 1e-7 m over
-    tens of metres), although only five poses are optimised: the prior holds what the
-    marginalised ones knew."""
+    each call then equals the batch solution of everything streamed so far, although only five
+    poses are optimised: the prior holds what the marginalised ones knew. To 1e-6 m over tens
+    of metres: H's pivots span 1e3 to 1e11, so the batch's own solution is determined to about
+    1e-7 m (LLᵀ and LDLᵀ factorisations end that far apart, at the same error to 1e-11)."""
     full, _ = visual_odometry(
         group, poses=40, reach=5, translation_sigma=1e-5, rotation_sigma=1e-5, seed=4
     )
@@ -70,7 +71,7 @@ def test_marginalisation_is_exact_where_the_problem_is_linear(group):
         prefix = full.copy()
         prefix.remove_nodes(np.arange(k + 1, full.num_nodes))
         reference = batch(prefix).values[k].as_matrix()
-        assert np.abs(newest[k] - reference).max() < 1e-7
+        assert np.abs(newest[k] - reference).max() < 1e-6
 
 
 def test_marginalised_poses_keep_their_last_estimate():
