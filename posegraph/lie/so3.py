@@ -35,55 +35,21 @@ def exp_matrix(phi: np.ndarray) -> np.ndarray:
 
 
 def matrix_to_quaternion(rotation: np.ndarray) -> np.ndarray:
-    """(…, 4) unit quaternions (x, y, z, w) with w ≥ 0, by Shepperd's largest-pivot method."""
+    """(…, 4) unit quaternions (x, y, z, w) with w ≥ 0, by Shepperd's largest-pivot method: the
+    rows of the symmetric K = [[R + Rᵀ − (tr R − 1) I, v], [vᵀ, 1 + tr R]], v = vee(R − Rᵀ),
+    are 4 q_k q for k = x, y, z, w, so the row of K's largest diagonal entry (4 q_k²) is the
+    most accurate (Shepperd 1978, J. Guidance and Control 1(3))."""
     r = np.asarray(rotation, float)
+    batch = r.shape[:-2]
     trace = r[..., 0, 0] + r[..., 1, 1] + r[..., 2, 2]
-    # Four candidate (unnormalised) quaternions; each is accurate when its pivot is large.
-    candidates = np.stack(
-        [
-            np.stack(
-                [
-                    1 + 2 * r[..., 0, 0] - trace,
-                    r[..., 0, 1] + r[..., 1, 0],
-                    r[..., 0, 2] + r[..., 2, 0],
-                    r[..., 2, 1] - r[..., 1, 2],
-                ],
-                -1,
-            ),
-            np.stack(
-                [
-                    r[..., 0, 1] + r[..., 1, 0],
-                    1 + 2 * r[..., 1, 1] - trace,
-                    r[..., 1, 2] + r[..., 2, 1],
-                    r[..., 0, 2] - r[..., 2, 0],
-                ],
-                -1,
-            ),
-            np.stack(
-                [
-                    r[..., 0, 2] + r[..., 2, 0],
-                    r[..., 1, 2] + r[..., 2, 1],
-                    1 + 2 * r[..., 2, 2] - trace,
-                    r[..., 1, 0] - r[..., 0, 1],
-                ],
-                -1,
-            ),
-            np.stack(
-                [
-                    r[..., 2, 1] - r[..., 1, 2],
-                    r[..., 0, 2] - r[..., 2, 0],
-                    r[..., 1, 0] - r[..., 0, 1],
-                    1 + trace,
-                ],
-                -1,
-            ),
-        ],
-        axis=-2,
-    )
-    pivots = np.stack([r[..., 0, 0], r[..., 1, 1], r[..., 2, 2], trace], -1)
-    best = np.argmax(pivots, axis=-1)[..., None, None]
-    q = np.take_along_axis(candidates, best, axis=-2)[..., 0, :]
-    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    k = np.empty(batch + (4, 4))
+    k[..., :3, :3] = r + np.swapaxes(r, -1, -2)
+    k[..., :3, 3] = k[..., 3, :3] = 2.0 * vee3(r)
+    diagonal = k.reshape(-1, 16)[:, ::5]  # a view of K's diagonal
+    diagonal[:, :3] -= (trace - 1.0).reshape(-1, 1)
+    diagonal[:, 3] = 1.0 + trace.ravel()
+    rows = k.reshape(-1, 4, 4)[np.arange(diagonal.shape[0]), np.argmax(diagonal, axis=1)]
+    q = rows.reshape(batch + (4,)) / np.linalg.norm(rows, axis=-1).reshape(batch + (1,))
     return np.where(q[..., 3:] < 0, -q, q)
 
 
