@@ -106,7 +106,9 @@ def initialize_new_nodes(graph: PoseGraph, options: SolverOptions) -> None:
 def _refine_one(graph: PoseGraph, node: int, max_iterations: int) -> None:
     """The local refinement of one new node (no prior on it), its neighbours held: Levenberg-
     Marquardt on its d × d normal equations over the edges that touch it, with the local
-    solve's tolerance; a streamed pose spared the set-up of a whole solve."""
+    solve's tolerance on the decrease reached, or promised by the Gauss-Newton model (whose
+    step is then taken without linearising there); a streamed pose spared the set-up of a
+    whole solve."""
     edges = graph.edges
     local = edges.subset(np.flatnonzero((edges.i == node) | (edges.j == node)))
     ends_at_i = (local.i == node)[:, None, None]
@@ -130,14 +132,19 @@ def _refine_one(graph: PoseGraph, node: int, max_iterations: int) -> None:
 
     value = graph.values[node]
     cost, hessian, gradient = linearized(value)
-    damping = 1e-6
+    damping, rejected = 1e-6, False
     for _ in range(max_iterations):
         damped = hessian + damping * np.diag(np.maximum(np.diag(hessian), 1e-12))
         step = np.linalg.lstsq(damped, -gradient, rcond=None)[0]
         trial = value.retract(step)
+        if -(gradient @ step) - 0.5 * (step @ hessian @ step) <= LOCAL_RELATIVE_DECREASE * cost:
+            # The model promises less than the tolerance: its step is the last, taken unweighed
+            # where the model has not failed yet.
+            value = value if rejected else trial
+            break
         trial_cost, trial_hessian, trial_gradient = linearized(trial)
         if not trial_cost < cost:
-            damping *= 10.0
+            damping, rejected = 10.0 * damping, True
             continue
         decrease = cost - trial_cost
         value, cost, hessian, gradient = trial, trial_cost, trial_hessian, trial_gradient

@@ -8,6 +8,7 @@ import pytest
 from posegraph_datasets.generators import manhattan_world
 
 from posegraph.init.spanning_tree import spanning_tree_values
+from posegraph.problem.factors import linearize_between
 from posegraph.smoother import composition, warm_start
 
 
@@ -47,7 +48,7 @@ def test_the_tree_test_agrees_with_connected_components(seed, monkeypatch):
     assert fast == warm_start._hangs_a_tree(i, j, old, count)
 
 
-def test_one_new_node_is_refined_to_the_local_optimum_of_a_whole_local_solve():
+def test_one_new_node_is_refined_to_the_local_optimum_of_a_whole_local_solve(monkeypatch):
     """A pose of a world with loops into it, taken as new: ``_refine_one`` ends where the local
     Levenberg-Marquardt solve of ``_local_graph`` ends (run to convergence, from the same
     composed start; 1e-6 on the pose)."""
@@ -64,5 +65,15 @@ def test_one_new_node_is_refined_to_the_local_optimum_of_a_whole_local_solve():
     expected = solve(local, tight).values[local_new][0]
     start = graph.values[last].as_matrix()
     assert np.abs(start - expected.as_matrix()).max() > 1e-3  # the loop moves it
+    linearisations = []
+
+    def counted(values, edges):
+        linearisations.append(len(edges))
+        return linearize_between(values, edges)
+
+    monkeypatch.setattr(composition, "linearize_between", counted)
     composition._refine_one(graph, last, 50)
     np.testing.assert_allclose(graph.values[last].as_matrix(), expected.as_matrix(), atol=1e-6)
+    # At the start and after the first step; the last step, whose Gauss-Newton model promised
+    # less than the tolerance, is taken without linearising there.
+    assert len(linearisations) == 2
