@@ -58,14 +58,15 @@ def rooted(count: int, i: np.ndarray, j: np.ndarray, root: int) -> tuple[np.ndar
     tail, head = np.concatenate([i, j]), np.concatenate([j, i])
     reverse = np.concatenate([np.arange(m, 2 * m), np.arange(m)])
     around = np.lexsort((head, tail))  # the arcs out of each node, one block per node
-    first_out = np.searchsorted(tail[around], tail[around])
+    tails = tail[around]
+    first_out = np.searchsorted(tails, tails)
     following = np.roll(around, -1)
-    block_end = np.append(tail[around][1:] != tail[around][:-1], True)
+    block_end = np.append(tails[1:] != tails[:-1], True)
     following[block_end] = around[first_out[block_end]]
     after = np.empty(2 * m, dtype=np.int64)
     after[around] = following  # the next arc out of the same node, cyclically
     successor = after[reverse]
-    start = around[np.searchsorted(tail[around], root)]
+    start = around[np.searchsorted(tails, root)]
     successor[successor == start] = np.flatnonzero(successor == start)  # the tour ends there
     remaining = (successor != np.arange(2 * m)).astype(np.int64)
     while True:
