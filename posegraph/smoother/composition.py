@@ -65,7 +65,8 @@ def _compose_directly(graph: PoseGraph, new: np.ndarray) -> bool:
 
 def _has_priors(graph: PoseGraph, nodes: np.ndarray) -> bool:
     """Whether a prior measures any of the node indices ``nodes``."""
-    return bool(np.isin(graph.priors.i, nodes).any())
+    priors = graph.priors.i
+    return bool(priors.size) and bool(np.isin(priors, nodes).any())
 
 
 def _local_graph(graph: PoseGraph, new: np.ndarray) -> tuple[PoseGraph, np.ndarray]:

@@ -185,7 +185,7 @@ class Smoother:
         """The solve from the start values: (result, edge weights, prior weights)."""
         graph = self.graph
         if start.debt is not None:
-            result = warm_start.composed_result(graph, self.solution, options, start.debt)
+            result = warm_start.composed_result(graph, self.solution, options, start)
             edge_weights, prior_weights = self.solution.weights_for(graph.edges, graph.priors)
             if kernel is not None:  # GNC's decisions stand
                 rejected = np.flatnonzero(~start.standing)

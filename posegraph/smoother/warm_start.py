@@ -9,14 +9,14 @@ import dataclasses
 
 import numpy as np
 
-from ..graph import PoseGraph, connected_components, information_ranks, measured_dof
+from ..graph import PoseGraph, measured_dof
 from ..init.choice import choose, initialize
 from ..problem.backends import resolve_backend
-from ..problem.factors import between_squares, chi2
 from ..robust.kernels import default_width
 from ..robust.spec import Kernel
 from ..solvers import PHASES, Result, SolverOptions, Summary
 from .composition import compose_new_nodes, initialize_new_nodes
+from .growth import Growth
 from .solution import Solution
 
 WARM_START_QUANTILE = 0.999
@@ -36,7 +36,8 @@ class Start:
     """How a call starts: the initialisation's name, what it reused, GNC's carried decisions,
     and, where the call solves nothing, how much the start's cost may exceed the optimum's
     (``Solution.debt``): the solution's, where it extends to the grown graph, or more, where
-    the call skips its solve (``skipped_debt``)."""
+    the call skips its solve (``skipped_debt``), with the error ½ Σ rᵀΩr of the measurements
+    added since at the start (``added_error``)."""
 
     init: str
     reused: tuple[str, ...] = ()
@@ -45,6 +46,7 @@ class Start:
     graduate: bool = True
     search: bool = True
     debt: float | None = None
+    added_error: float = 0.0
 
 
 def warm_started(
@@ -54,33 +56,36 @@ def warm_started(
     ``solution`` (``warm_start``, or composed where it extends), GNC's carried decisions, and
     whether the call may solve nothing (``Start.debt``)."""
     solved = int(graph.initialized.sum())
+    growth = Growth(graph, solution)
     decisions = standing = None
     if kernel is not None and kernel.spec.gnc:
-        decisions = previous_decisions(graph, solution, kernel)
-    if decisions is not None and standing_decisions(graph, solution, kernel.measured):
+        decisions = previous_decisions(growth, kernel)
+    if decisions is not None and standing_decisions(growth, kernel.measured):
         standing = decisions
     same_problem = standing is not None if kernel else solution.summary.robust is None
-    debt = None
-    if same_problem and solution_extends(graph, solution):
+    debt, added_error = None, 0.0  # a tree's edges fit its composed nodes exactly
+    if same_problem and solution_extends(growth):
         solved = len(solution.fixed)
         compose_new_nodes(graph, np.arange(graph.num_nodes) >= solved)
         init = "warm start"
         debt = affordable(solution.debt, solution.summary.final_error, options)
     else:
-        init = warm_start(graph, solution, options, least_squares=kernel is None)
+        init = warm_start(graph, growth, options, least_squares=kernel is None)
         if kernel is None and init == "warm start":
-            debt = skipped_debt(graph, solution, options)
+            debt = skipped_debt(growth, options)
+            if debt is not None:
+                added_error = 0.5 * growth.added_chi2
     reused = (f"previous solution ({solved} nodes)",) if init == "warm start" else ()
     if standing is not None:
         reused += (
             f"GNC's decisions ({np.count_nonzero(~standing)} rejected; nothing added since"
             " is under the kernel)",
         )
-    return Start(init, reused, standing, decisions, debt=debt)
+    return Start(init, reused, standing, decisions, debt=debt, added_error=added_error)
 
 
 def warm_start(
-    graph: PoseGraph, solution: Solution, options: SolverOptions, least_squares: bool
+    graph: PoseGraph, growth: Growth, options: SolverOptions, least_squares: bool
 ) -> str:
     """Start from the previous solution, composing and refining the nodes added since
     (``composition.initialize_new_nodes``); returns the initialisation's name.
@@ -91,19 +96,20 @@ def warm_start(
     """
     if not graph.initialized.all():
         initialize_new_nodes(graph, options)
-    if least_squares and not _agree_with_solution(graph, solution) and choose(graph) == "chordal":
+    if least_squares and not _agree_with_solution(growth) and choose(graph) == "chordal":
         graph.set_values(initialize(graph, "chordal"), check=False)
         return RESTART
     return "warm start"
 
 
-def previous_decisions(graph: PoseGraph, solution: Solution, kernel: Kernel) -> np.ndarray | None:
+def previous_decisions(growth: Growth, kernel: Kernel) -> np.ndarray | None:
     """The last GNC run's decisions, carried to the robust problem (``_robust_problem``) of the
     grown graph: the edges (and priors, where the problem holds them) that the run kept, and
     every measurement appended since. None unless that run solved the same problem to its end
     (the same kernel and width, and ``kernel``'s robust class the same over its measurements)
     and the graph has only grown since: its measurements come first and unchanged (those that
     remain, after ``PoseGraph``'s removals: ``Solution.without``)."""
+    graph, solution = growth.graph, growth.solution
     if solution.gnc is None or not solution.gnc.spec.same_kernel(kernel.spec):
         return None
     measured, measured_then = kernel.measured, solution.gnc.measured
@@ -114,11 +120,7 @@ def previous_decisions(graph: PoseGraph, solution: Solution, kernel: Kernel) -> 
     old = np.arange(old_edges)
     if then_with_priors:
         old = np.concatenate([old, graph.num_edges + np.arange(old_priors)])
-    if not (
-        graph.edges.starts_with(solution.edges)
-        and graph.priors.starts_with(solution.priors)
-        and np.array_equal(measured[old], measured_then)
-    ):
+    if not (growth.measurements_kept and np.array_equal(measured[old], measured_then)):
         return None
     kept = np.ones(len(measured), dtype=bool)
     kept[:old_edges] = solution.edge_weights > 0
@@ -127,62 +129,32 @@ def previous_decisions(graph: PoseGraph, solution: Solution, kernel: Kernel) -> 
     return kept
 
 
-def standing_decisions(graph: PoseGraph, solution: Solution, measured: np.ndarray) -> bool:
+def standing_decisions(growth: Growth, measured: np.ndarray) -> bool:
     """Whether the last GNC run's ``decisions`` (``previous_decisions``) stand for the grown
     graph: all that was added since is a tree of trusted between edges that hangs free new
     nodes off the solved ones, nothing in ``measured``, no prior, no hold, no cycle. The TLS
     problem over the solved nodes is then unchanged, and each new node has one place that fits
     its edges exactly, so the decisions are as good for the grown graph as they were for the
     old one, and a least-squares solve over them ends it."""
-    return not measured[len(solution.edges) : graph.num_edges].any() and _grew_by_a_tree(
-        graph, solution
-    )
+    return not measured[len(growth.solution.edges) : growth.graph.num_edges].any() and growth.tree
 
 
-def _grew_by_appending(graph: PoseGraph, solution: Solution) -> bool:
-    """Whether the graph grew since its last solution by appended nodes and between edges
-    alone: nothing was removed since (``Solution.debt``), the solution's edges and priors come
-    first and unchanged, and no prior and no hold is new."""
-    old = len(solution.fixed)
-    return (
-        solution.debt is not None
-        and len(graph.priors) == len(solution.priors)
-        and np.array_equal(graph.fixed[:old], solution.fixed)
-        and not graph.fixed[old:].any()
-        and graph.edges.starts_with(solution.edges)
-        and graph.priors.starts_with(solution.priors)
-    )
-
-
-def _grew_by_a_tree(graph: PoseGraph, solution: Solution) -> bool:
-    """Whether all that was added to the graph since its last solution is a tree of between
-    edges that hangs the new nodes off the solved ones (``_grew_by_appending``, and no cycle is
-    new). Each new node then has one place that fits its edges exactly, and the problem over
-    the solved nodes is as it was."""
-    old, new_edges = len(solution.fixed), slice(len(solution.edges), None)
-    return _hangs_a_tree(
-        graph.edges.i[new_edges], graph.edges.j[new_edges], old, graph.num_nodes
-    ) and _grew_by_appending(graph, solution)
-
-
-def solution_extends(graph: PoseGraph, solution: Solution) -> bool:
+def solution_extends(growth: Growth) -> bool:
     """Whether the last solution, with the new nodes composed along the new edges, is an
     optimum of the graph, given that the problem over the solved nodes is the one it solved
     (least squares again, or GNC's decisions standing: the caller checks): its solve converged,
-    the solved nodes still hold its values, and the graph grew by a tree (``_grew_by_a_tree``)
-    of edges whose information is full rank. The new edges' residuals are then zero and the
-    rest of the cost is at its optimum, so no solve can lower it."""
-    old = len(solution.fixed)
-    new_edges = graph.edges.subset(slice(len(solution.edges), None))
+    the solved nodes still hold its values, and the graph grew by a tree (``Growth.tree``) of
+    edges whose information is full rank. The new edges' residuals are then zero and the rest
+    of the cost is at its optimum, so no solve can lower it."""
     return (
-        solution.summary.converged
-        and _grew_by_a_tree(graph, solution)
-        and graph.values[:old].same_as(solution.values)
-        and bool(np.all(information_ranks(new_edges.information) == graph.group.dof))
+        growth.solution.summary.converged
+        and growth.tree
+        and growth.values_kept
+        and bool(np.all(growth.new_ranks == growth.graph.group.dof))
     )
 
 
-def skipped_debt(graph: PoseGraph, solution: Solution, options: SolverOptions) -> float | None:
+def skipped_debt(growth: Growth, options: SolverOptions) -> float | None:
     """How much the cost at the warm start (the solved nodes at their values, the new ones
     refined) may exceed the grown graph's optimum, where that is at most
     ``options.skip_within`` of the cost, so that the call may skip its solve; else None.
@@ -192,15 +164,16 @@ def skipped_debt(graph: PoseGraph, solution: Solution, options: SolverOptions) -
     graph's optimum is at least that optimum (each measurement's cost is ≥ 0), and the cost at
     the warm start is that cost plus the added measurements' cost c: the excess is at most
     ``debt`` + c. Only where the graph grew by appended nodes and edges alone
-    (``_grew_by_appending``: a new prior may free a held node)."""
+    (``Growth.appended``: a new prior may free a held node)."""
+    solution = growth.solution
     if not (
         options.skip_within > 0
         and solution.summary.converged
-        and _grew_by_appending(graph, solution)
-        and graph.values[: len(solution.fixed)].same_as(solution.values)
+        and growth.appended
+        and growth.values_kept
     ):
         return None
-    added = _added_cost(graph, solution)
+    added = 0.5 * growth.added_chi2
     return affordable(solution.debt + added, solution.summary.final_error + added, options)
 
 
@@ -210,21 +183,15 @@ def affordable(debt: float, cost: float, options: SolverOptions) -> float | None
     return debt if debt == 0 or debt <= options.skip_within * cost else None
 
 
-def _added_cost(graph: PoseGraph, solution: Solution) -> float:
-    """½ Σ rᵀΩr of the edges appended since the solution, at the graph's values."""
-    added = graph.edges.subset(slice(len(solution.edges), None))
-    return 0.5 * float(between_squares(graph.values, added).sum())
-
-
 def composed_result(
-    graph: PoseGraph, solution: Solution, options: SolverOptions, debt: float = 0.0
+    graph: PoseGraph, solution: Solution, options: SolverOptions, start: Start
 ) -> Result:
     """The graph's values as a result of no iterations: an optimum by ``solution_extends``, or
-    within ``debt`` of one where the call skipped its solve (``skipped_debt``). Its error is the
-    solution's plus that of the measurements added since (for a tree, zero but for rounding),
+    within the ``start``'s debt of one where the call skipped its solve (``skipped_debt``). Its
+    error is the solution's plus that of the measurements added since (``Start.added_error``),
     and the free nodes are the solution's and the new ones (neither adds a hold)."""
-    previous = solution.summary
-    error = previous.final_error + _added_cost(graph, solution)
+    previous, debt = solution.summary, start.debt
+    error = previous.final_error + start.added_error
     new_nodes = graph.num_nodes - len(solution.fixed)
     summary = Summary(
         method=options.method,
@@ -241,29 +208,15 @@ def composed_result(
     return Result(graph.values, summary)
 
 
-def _hangs_a_tree(i: np.ndarray, j: np.ndarray, old: int, count: int) -> bool:
-    """Whether edges (i, j) over nodes 0 … count − 1 form a tree over the nodes from ``old`` on
-    and the nodes before ``old`` taken as one: one edge per new node, and all connected."""
-    new = count - old
-    if len(i) != new:
-        return False
-    # The old nodes become node 0, and new node k becomes k − old + 1.
-    ends = np.maximum(np.stack([i, j]) - old + 1, 0)
-    return bool(connected_components(new + 1, ends[0], ends[1]).max() == 0)
-
-
-def _agree_with_solution(graph: PoseGraph, solution: Solution) -> bool:
+def _agree_with_solution(growth: Growth) -> bool:
     """Whether the measurements added since the last solution are consistent with it, by a χ²
     innovation test: their Σ rᵀΩr at the warm start is below χ²_m(``WARM_START_QUANTILE``),
     m = Σ rank Ω, the directions they measure (the solved nodes keep their values, so the cost
     of the others is unchanged). Only appended measurements are tested: if some were removed
     or changed since, this holds, as the solution still suits the measurements that remain."""
-    edges, priors = solution.edges, solution.priors
-    if not (graph.edges.starts_with(edges) and graph.priors.starts_with(priors)):
+    if not growth.measurements_kept:
         return True
-    new_edges = graph.edges.subset(slice(len(edges), None))
-    new_priors = graph.priors.subset(slice(len(priors), None))
-    dof = measured_dof(new_edges.information) + measured_dof(new_priors.information)
+    dof = int(growth.new_ranks.sum()) + measured_dof(growth.new_priors.information)
     if dof == 0:
         return True
-    return chi2(graph.values, new_edges, new_priors) <= default_width(dof, WARM_START_QUANTILE) ** 2
+    return growth.added_chi2 <= default_width(dof, WARM_START_QUANTILE) ** 2

@@ -9,7 +9,7 @@ from posegraph_datasets.generators import manhattan_world
 
 from posegraph.init.spanning_tree import spanning_tree_values
 from posegraph.problem.factors import linearize_between
-from posegraph.smoother import composition, warm_start
+from posegraph.smoother import composition, growth
 
 
 def test_direct_composition_equals_the_spanning_tree_along_the_same_edges():
@@ -43,9 +43,9 @@ def test_the_tree_test_agrees_with_connected_components(seed, monkeypatch):
     old, new = 3, int(rng.integers(1, 6))
     count = old + new
     i, j = rng.integers(0, count, size=(2, new))
-    fast = warm_start._hangs_a_tree(i, j, old, count)
+    fast = growth._hangs_a_tree(i, j, old, count)
     monkeypatch.setattr(composition, "DIRECT_COMPOSITION", 0)
-    assert fast == warm_start._hangs_a_tree(i, j, old, count)
+    assert fast == growth._hangs_a_tree(i, j, old, count)
 
 
 def test_one_new_node_is_refined_to_the_local_optimum_of_a_whole_local_solve(monkeypatch):
