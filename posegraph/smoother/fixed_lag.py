@@ -29,8 +29,9 @@ from ..solvers import (
     SolverOptions,
     Summary,
 )
+from .band import BandMatrix
 from .composition import compose_new_nodes
-from .marginal import DENSE_SIZE, GaussianPrior, Quadratic, marginalized, quadratic
+from .marginal import GaussianPrior, Quadratic, marginalized, quadratic
 
 INITIAL_DAMPING = 1e-5
 """λ at the start of each call; λ·I damps the step towards the current tangents, and grows or
@@ -129,14 +130,14 @@ class FixedLag:
         init = self._initialize(graph)
         window = self._window(graph)
         old = self._old(graph, window.nodes)
-        records, termination, initial, final = _optimize(window, options, began)
+        records, termination, initial, final, held = _optimize(window, options, began)
         graph.set_values(graph.values.set_at(window.nodes, window.estimate()), check=False)
         self.delta[window.nodes] = window.delta
         self._marginalize(graph, window, old)
         free = int(np.count_nonzero(window.position >= 0))
         summary = Summary(
             method="lm",
-            linear_solver="dense" if free * graph.group.dof <= DENSE_SIZE else "scipy",
+            linear_solver=held,
             initial_error=initial,
             final_error=final,
             iterations=records,
@@ -270,20 +271,22 @@ def _optimize(window: _Window, options: SolverOptions, began: float):
     predicts no more than that for an iteration's first step, or when the model's gradient
     falls below ``gradient_tolerance`` (as in ``solve``). In the last two cases no step is
     tried: near the minimum, or where the window fits its measurements exactly, the actual
-    decrease is round-off and every λ would be tried in vain."""
+    decrease is round-off and every λ would be tried in vain. Returns (records, termination,
+    initial error, final error, how the last model's H was held: ``Quadratic.storage``)."""
     error = initial = window.error(window.delta)
-    records, damping = [], INITIAL_DAMPING
+    records, damping, held = [], INITIAL_DAMPING, "dense"
     free = window.position >= 0
     if error <= 0.0 or not free.any():
-        return records, CONVERGED, initial, error
+        return records, CONVERGED, initial, error, held
     d = window.delta.shape[-1]
     for iteration in range(1, options.max_iterations + 1):
         model = quadratic(
             window.linearization, window.edges, window.priors, window.position, window.prior
         )
+        held = model.storage
         current = window.delta[free].reshape(-1)
         if np.max(np.abs(model.hessian @ current - model.gradient)) < options.gradient_tolerance:
-            return records, GRADIENT_BELOW_TOLERANCE, initial, error
+            return records, GRADIENT_BELOW_TOLERANCE, initial, error, held
         previous = error
         first = True
         while True:
@@ -292,7 +295,7 @@ def _optimize(window: _Window, options: SolverOptions, began: float):
                 step, trial = current, np.inf
             else:
                 if first and model.decrease(current, step) <= options.relative_decrease * error:
-                    return records, CONVERGED, initial, error
+                    return records, CONVERGED, initial, error, held
                 delta = window.delta.copy()
                 delta[free] = step.reshape(-1, d)
                 trial = window.error(delta)
@@ -318,8 +321,8 @@ def _optimize(window: _Window, options: SolverOptions, began: float):
             damping *= DAMPING_FACTOR
         decrease = previous - error
         if decrease <= 0 or decrease <= options.relative_decrease * previous:
-            return records, CONVERGED, initial, error
-    return records, MAX_ITERATIONS, initial, error
+            return records, CONVERGED, initial, error, held
+    return records, MAX_ITERATIONS, initial, error, held
 
 
 def _accept(window: _Window, delta: np.ndarray, free: np.ndarray) -> None:
@@ -335,25 +338,20 @@ def _accept(window: _Window, delta: np.ndarray, free: np.ndarray) -> None:
 
 def _solve(model: Quadratic, damping: float, current: np.ndarray) -> np.ndarray | None:
     """The tangents that minimise the model plus ½ λ ‖δ − current‖²: (H + λI) δ = g + λ current;
-    None where H + λI is not numerically positive definite. A dense H is factorised by LAPACK's
-    Cholesky directly (scipy.linalg's wrappers cost more than a small window's factorisation),
-    as a band matrix where its band is narrower than half its size (a window's nodes are in
-    time order, and its measurements reach a few poses back)."""
+    None where H + λI is not numerically positive definite. A band or dense H is factorised by
+    LAPACK's band or dense Cholesky directly (scipy.linalg's wrappers cost more than a small
+    window's factorisation)."""
     hessian, rhs = model.hessian, model.gradient + damping * current
-    if isinstance(hessian, np.ndarray):
+    if isinstance(hessian, (BandMatrix, np.ndarray)):
         from scipy.linalg import lapack  # on use: a start without a fixed-lag smoother does without
 
-        size, bandwidth = rhs.size, model.bandwidth
-        if 2 * bandwidth < size:
-            offsets = np.arange(bandwidth + 1)[:, None]
-            columns = np.arange(size)
-            rows = np.minimum(columns + offsets, size - 1)
-            band = np.where(columns + offsets < size, hessian[rows, columns], 0.0)
-            band[0] += damping  # LAPACK's lower band storage: band[i − j, j] = H[i, j]
+        if isinstance(hessian, BandMatrix):
+            band = hessian.lower()
+            band[0] += damping
             factor, failed = lapack.dpbtrf(band, lower=1)
             solve = lapack.dpbtrs
         else:
-            factor, failed = lapack.dpotrf(hessian + damping * np.eye(size), lower=True)
+            factor, failed = lapack.dpotrf(hessian + damping * np.eye(rhs.size), lower=True)
             solve = lapack.dpotrs
         if failed:
             return None

@@ -12,12 +12,14 @@ import numpy as np
 from ..graph import EdgeSet
 from ..lie import LieGroup
 from ..problem.factors import linearize_between, linearize_priors
+from .band import BandMatrix
 
 if TYPE_CHECKING:
     import scipy.sparse
 
 DENSE_SIZE = 1500
-"""Systems up to this many unknowns are held and solved dense, larger ones sparse."""
+"""Systems whose band is half their size or wider are held and solved dense up to this many
+unknowns, sparse beyond; narrower bands as band matrices (``storage``)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -40,12 +42,19 @@ class GaussianPrior:
 class Quadratic:
     """½ δᵀ H δ − gᵀ δ + c over the stacked tangents of n nodes (H n·d square): the
     first-order model of measurements, ½ Σ ‖r + J δ‖²_Ω, around their linearisation point.
-    H is zero more than ``bandwidth`` entries off its diagonal."""
+    H is zero more than ``bandwidth`` entries off its diagonal, and held as ``storage`` says."""
 
-    hessian: np.ndarray | scipy.sparse.csr_matrix
+    hessian: np.ndarray | BandMatrix | scipy.sparse.csr_matrix
     gradient: np.ndarray
     constant: float
     bandwidth: int
+
+    @property
+    def storage(self) -> str:
+        """How H is held: "band", "dense" or "scipy" (sparse)."""
+        if isinstance(self.hessian, BandMatrix):
+            return "band"
+        return "dense" if isinstance(self.hessian, np.ndarray) else "scipy"
 
     def decrease(self, start: np.ndarray, end: np.ndarray) -> float:
         """How much the model falls from tangents ``start`` to ``end`` (stacked)."""
@@ -65,7 +74,7 @@ def quadratic(
 ) -> Quadratic:
     """The ``Quadratic`` of between ``edges`` and unary ``priors`` linearised at ``values`` (every
     node's), plus a ``GaussianPrior``, over the nodes whose ``position`` (per node) is ≥ 0, in
-    that order; the others are constants. H is dense up to ``DENSE_SIZE`` unknowns."""
+    that order; the others are constants. H is held as ``storage`` chooses."""
     d, n = values.dof, int(position.max(initial=-1)) + 1
     between, unary = linearize_between(values, edges), linearize_priors(values, priors)
     parts = [
@@ -77,29 +86,46 @@ def quadratic(
     np.add.at(gradient, nodes, pieces)
     gradient = gradient.reshape(-1)
     constant = parts[0][5] + parts[1][5]
-    hessian = _assembled(rows, cols, blocks, n)
     reach = np.abs(rows - cols).max(initial=0)
     if prior is not None:
+        reach = max(reach, np.ptp(position[prior.nodes]))
+    bandwidth = int(reach + 1) * d - 1
+    hessian = _assembled(rows, cols, blocks, n, bandwidth)
+    if prior is not None:
         at = (position[prior.nodes][:, None] * d + np.arange(d)).reshape(-1)
-        if isinstance(hessian, np.ndarray):
+        if isinstance(hessian, BandMatrix):
+            hessian.add(at, prior.hessian)
+        elif isinstance(hessian, np.ndarray):
             hessian[np.ix_(at, at)] += prior.hessian
         else:
             hessian = hessian + _embedded(prior.hessian, at, n * d)
         gradient[at] += prior.gradient
         constant += prior.constant
-        reach = max(reach, np.ptp(position[prior.nodes]))
-    return Quadratic(hessian, gradient, float(constant), int(reach + 1) * d - 1)
+    return Quadratic(hessian, gradient, float(constant), bandwidth)
 
 
-def _assembled(rows: np.ndarray, cols: np.ndarray, blocks: np.ndarray, n: int):
-    """The n·d square matrix of (d, d) ``blocks`` summed at block ``rows`` and ``cols``: dense
-    up to ``DENSE_SIZE`` unknowns, else sparse (CSR)."""
+def storage(size: int, bandwidth: int) -> str:
+    """How a window's H of ``size`` unknowns and ``bandwidth`` is held: as a band matrix where
+    its band is narrower than half its size, else dense up to ``DENSE_SIZE`` unknowns, else
+    sparse (scipy)."""
+    if 2 * bandwidth < size:
+        return "band"
+    return "dense" if size <= DENSE_SIZE else "scipy"
+
+
+def _assembled(rows: np.ndarray, cols: np.ndarray, blocks: np.ndarray, n: int, bandwidth: int):
+    """The n·d square matrix of (d, d) ``blocks`` summed at block ``rows`` and ``cols``, held as
+    ``storage`` chooses for its ``bandwidth``."""
     d = blocks.shape[-1]
+    size = n * d
+    held = storage(size, bandwidth)
+    if held == "band":
+        return BandMatrix.of_blocks(rows, cols, blocks, size, bandwidth)
     entry_rows = (rows[:, None, None] * d + np.arange(d)[:, None]).repeat(d, axis=2)
     entry_cols = (cols[:, None, None] * d + np.arange(d)[None, :]).repeat(d, axis=1)
-    if n * d <= DENSE_SIZE:
-        flat = (entry_rows * (n * d) + entry_cols).ravel()
-        return np.bincount(flat, blocks.ravel(), (n * d) ** 2).reshape(n * d, n * d)
+    if held == "dense":
+        flat = (entry_rows * size + entry_cols).ravel()
+        return np.bincount(flat, blocks.ravel(), size**2).reshape(size, size)
     import scipy.sparse  # on use: dense windows do without it
 
     return scipy.sparse.coo_matrix(
@@ -147,7 +173,7 @@ def marginalized(
     entries = np.repeat(kept, d)
     dense = model.hessian
     if not isinstance(dense, np.ndarray):
-        dense = dense.toarray()
+        dense = dense.toarray()  # a band or sparse H
     h_kk = dense[np.ix_(entries, entries)]
     h_km = dense[np.ix_(entries, ~entries)]
     h_mm = dense[np.ix_(~entries, ~entries)]
