@@ -186,7 +186,8 @@ class Smoother:
         graph = self.graph
         if start.debt is not None:
             result = warm_start.composed_result(graph, self.solution, options, start)
-            edge_weights, prior_weights = self.solution.weights_for(graph.edges, graph.priors)
+            # a call solves nothing only where the graph grew by appending (``Growth.appended``)
+            edge_weights, prior_weights = self.solution.appended_weights(graph.num_edges)
             if kernel is not None:  # GNC's decisions stand
                 rejected = np.flatnonzero(~start.standing)
                 summary = with_robust_record(result.summary, kernel, rejected, graph)

@@ -94,6 +94,13 @@ class Solution:
             _carried(priors, self.priors, self.prior_weights, 1.0),
         )
 
+    def appended_weights(self, num_edges: int) -> tuple[np.ndarray, np.ndarray]:
+        """The weights of a graph's ``num_edges`` between edges and of its priors where it grew
+        since this solution by appended nodes and edges alone (``Growth.appended``, already
+        tested): this solution's, then 1 for each edge appended."""
+        appended = np.ones(num_edges - len(self.edges))
+        return np.concatenate([self.edge_weights, appended]), self.prior_weights.copy()
+
     def rejected_for(self, edges: EdgeSet, priors: EdgeSet) -> tuple[np.ndarray, np.ndarray]:
         """Masks over ``edges`` and over ``priors`` of the measurements that this solution's
         robust run rejected (``summary.rejected_edges`` and ``rejected_priors``), by the rule of

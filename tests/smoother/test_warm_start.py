@@ -481,3 +481,23 @@ def test_skip_within_must_be_a_finite_share():
     for bad in (-0.1, float("nan"), float("inf")):
         with pytest.raises(ValueError, match="skip_within"):
             SolverOptions(skip_within=bad)
+
+
+def test_a_composed_call_keeps_the_last_runs_weights_and_weighs_what_it_appended_one():
+    """GNC rejects the false loops; an odometry pose appended then leaves the decisions
+    standing and solves nothing: the weights are the run's (0 on every false loop), then 1 for
+    the new edge, as ``Solution.weights_for`` finds by comparing the edge sets."""
+    clean, _ = manhattan_world(120, seed=2)
+    graph, false = add_false_loops(clean, 0.1, seed=2)
+    smoother = posegraph.Smoother(graph)
+    smoother.optimize(robust="gnc")
+    before = smoother.weights()[0]
+    assert not before[false].any() and false.any()
+    _add_odometry(graph)
+    result = smoother.optimize(robust="gnc")
+    assert result.summary.termination == COMPOSED
+    edge_weights, prior_weights = smoother.weights()
+    np.testing.assert_array_equal(edge_weights, np.append(before, 1.0))
+    expected = smoother.solution.weights_for(graph.edges, graph.priors)
+    np.testing.assert_array_equal(edge_weights, expected[0])
+    np.testing.assert_array_equal(prior_weights, expected[1])
