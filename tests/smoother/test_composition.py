@@ -37,15 +37,21 @@ def test_direct_composition_declines_what_it_cannot_do():
 
 
 @pytest.mark.parametrize("seed", range(20))
-def test_the_tree_test_agrees_with_connected_components(seed, monkeypatch):
-    """Random edge sets over 3 old nodes and up to 5 new ones: union-find and scipy agree."""
+def test_the_tree_test_agrees_with_scipys_connected_components(seed):
+    """Random edge sets over 3 old nodes and up to 5 new ones: ``_hangs_a_tree`` holds exactly
+    where there is one edge per new node and scipy finds the new nodes and the old ones,
+    taken as one, connected."""
+    import scipy.sparse
+    from scipy.sparse.csgraph import connected_components
+
     rng = np.random.default_rng(seed)
     old, new = 3, int(rng.integers(1, 6))
     count = old + new
     i, j = rng.integers(0, count, size=(2, new))
-    fast = growth._hangs_a_tree(i, j, old, count)
-    monkeypatch.setattr(composition, "DIRECT_COMPOSITION", 0)
-    assert fast == growth._hangs_a_tree(i, j, old, count)
+    ends = np.maximum(np.stack([i, j]) - old + 1, 0)  # the old nodes as node 0
+    adjacency = scipy.sparse.coo_matrix((np.ones(new), (ends[0], ends[1])), (new + 1, new + 1))
+    connected = connected_components(adjacency, directed=False)[0] == 1
+    assert growth._hangs_a_tree(i, j, old, count) == connected
 
 
 def test_one_new_node_is_refined_to_the_local_optimum_of_a_whole_local_solve(monkeypatch):
