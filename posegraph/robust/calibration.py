@@ -10,14 +10,14 @@ deleted residuals of the inliers, and the innovations of what a robust solve lef
   them, but on real data, whose residuals have heavier tails than a Gaussian's, it fails
   Baarda's test on several per cent of the true measurements;
 - the tail scale, the largest at which no more of all the measurements fail the test than it
-  lets through, leaving out the gross outliers: those that fail it by more than ``OFF_BY``
-  times its limit under the median scale.
+  lets through, leaving out the gross outliers: beyond ``OFF_BY`` times its limit under the
+  median scale, or beyond a heavy tail of true ones that runs on to a jump (``noise.beyond_tail``).
 A class gets the smaller; in a robust solve that kept gross outliers, the median scale, so that
 the next solve rejects them (and the tail scale then re-admits the true measurements of the
 heavy tail that it rejected too). Where that wider width brings gross outliers back,
 calibration ends there, with the decisions from before it settled at it: the two scales would
-otherwise alternate (parking-garage: its true loops' tail is heavier than the median scale
-allows). In least squares the inliers are the measurements that pass the test.
+otherwise alternate (a true tail that runs on into the false measurements' tests). In least
+squares the inliers are the measurements that pass the test.
 
 After a scaling that narrows the width, GNC runs anew (searching locally once the width
 holds): decisions settled from false loops kept stay bent around them. After any other, a
@@ -60,10 +60,10 @@ from .leverage import Leverage
 from .noise import (
     FALSE_SHARE,
     KINDS,
-    OFF_BY,
     QUANTILE,
     MeasurementTests,
     NoiseClass,
+    beyond_tail,
     limits,
     measurement_kinds,
     measurement_tests,
@@ -198,7 +198,7 @@ def _estimate(tests: MeasurementTests, inliers: np.ndarray, majority: bool = Tru
     guessed = {kind: scale for kind, scale in guessed.items() if kind not in median}
     median |= guessed
     tail = dict(guessed)
-    gross = tests.tested * _by_measurement(tests, median) > OFF_BY * tests.limits
+    gross = beyond_tail(tests.tested * _by_measurement(tests, median) / tests.limits, telling)
     for index, kind in enumerate(KINDS):
         members = telling & ~gross & (tests.kinds == index)
         if kind in median and kind not in guessed:

@@ -35,6 +35,16 @@ FALSE_SHARE = 0.01
 are named as likely false."""
 
 
+GAP = 4.0
+"""A jump of this factor between consecutive tests (d² over its limit, under the median
+scales) above ``OFF_BY`` ends a heavy tail of true measurements (``tail_end``)."""
+TAIL_MAX = 100.0
+"""A heavy tail reaches at most this many times the limit."""
+TAIL_MEMBERS = 10
+"""A heavy tail holds at least this many measurements beyond ``OFF_BY`` times the limit: one
+or two beyond it and a jump are false measurements near the true ones."""
+
+
 @dataclasses.dataclass(frozen=True)
 class NoiseClass:
     """One class of measurement at a solution: how many, their redundancy (Σ tr(I − Mₑₑ)),
@@ -164,6 +174,27 @@ def limits(ranks: np.ndarray) -> np.ndarray:
     distinct, index = np.unique(ranks, return_inverse=True)
     of_distinct = [default_width(int(k), QUANTILE) ** 2 if k else np.inf for k in distinct]
     return np.array(of_distinct, dtype=float)[index.reshape(np.shape(ranks))]
+
+
+def beyond_tail(ratios: np.ndarray, among: np.ndarray) -> np.ndarray:
+    """Where ``ratios`` (test over limit) are gross: beyond ``tail_end`` of those ``among``."""
+    return ratios > tail_end(ratios[among])
+
+
+def tail_end(ratios: np.ndarray) -> float:
+    """The ratio of test to limit beyond which a measurement is gross: ``OFF_BY``, or the start
+    of a jump of ``GAP`` where at least ``TAIL_MEMBERS`` ratios run on from ``OFF_BY`` to it in
+    smaller steps and it starts below ``TAIL_MAX``: a tail of true measurements whose noise is
+    heavier than a Gaussian's, apart from the gross outliers (parking-garage's true loops;
+    ``docs/architecture.md``)."""
+    ascending = np.sort(ratios[np.isfinite(ratios)])
+    above = ascending[max(np.searchsorted(ascending, OFF_BY, side="right") - 1, 0) :]
+    jumps = np.flatnonzero(above[1:] >= GAP * above[:-1])
+    if not jumps.size or not OFF_BY < above[jumps[0]] <= TAIL_MAX:
+        return OFF_BY
+    if np.count_nonzero(above[: jumps[0] + 1] > OFF_BY) < TAIL_MEMBERS:
+        return OFF_BY
+    return float(above[jumps[0]])
 
 
 def noise_consistency(

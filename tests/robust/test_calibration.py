@@ -13,6 +13,7 @@ from posegraph_datasets.outliers import add_false_loops, rejection_rates
 
 import posegraph
 from posegraph.graph import odometry_mask
+from posegraph.problem.factors import chi2
 from posegraph.robust import calibration, noise
 from posegraph.robust.gnc import gnc_tls
 from posegraph.robust.kernels import default_width
@@ -207,3 +208,77 @@ def test_the_noise_check_borrows_the_local_searchs_leverages_and_agrees_with_its
         np.testing.assert_allclose(
             getattr(lent, field.name), getattr(own, field.name), rtol=1e-9, atol=1e-12
         )
+
+
+def _loop_tests(ratios: np.ndarray) -> noise.MeasurementTests:
+    """Tests of loop closures (rank 3) whose d² is ``ratios`` times their χ²₃(0.999) limit."""
+    ranks = np.full(ratios.size, 3)
+    limits = noise.limits(ranks)
+    tested = ratios * limits
+    kinds = np.ones(ratios.size, dtype=np.int64)
+    return noise.MeasurementTests(kinds, tested, np.full(ratios.size, 3.0), tested, ranks, limits)
+
+
+def test_a_heavy_tail_of_true_loops_parted_from_the_false_ones_widens_the_tail_scale():
+    """parking-garage's pattern: the true loops' tests run on from the bulk past ``OFF_BY``
+    times the limit to about 45×, the false ones start at 1,300×. After a robust solve that rejected both,
+    the heavy tail is not gross: the tail scale lets all but 0.1% of the true loops pass, and
+    every false loop still fails by more than ``OFF_BY``. Where the true loops' tests run on
+    into the false ones', the heavy ones stay gross and fail."""
+    rng = np.random.default_rng(0)
+    limit = default_width(3, 0.999) ** 2
+    bulk = rng.chisquare(3, size=2000) / limit
+    false = np.geomspace(1300.0, 1e5, 200)
+    for heavy, parted in [
+        (np.geomspace(1.5, 45.0, 40), True),
+        (np.geomspace(1.5, 900.0, 40), False),
+    ]:
+        ratios = np.concatenate([bulk, heavy, false])
+        inliers = np.arange(ratios.size) < bulk.size
+        tests = _loop_tests(ratios)
+        scale = calibration._estimate(tests, inliers).scales()["loop closures"]
+        failing = tests.tested * scale > tests.limits
+        true_failing = np.count_nonzero(failing[: bulk.size + heavy.size])
+        assert np.all(
+            tests.tested[-false.size :] * scale > noise.OFF_BY * tests.limits[-false.size :]
+        )
+        if parted:
+            assert true_failing <= 0.001 * (bulk.size + heavy.size) + 1
+        else:
+            assert true_failing >= np.count_nonzero(heavy > noise.OFF_BY) - 1
+
+
+@pytest.mark.parametrize(
+    ("beyond", "gross_from"),
+    [
+        (np.geomspace(3.5, 45.0, 25), 45.0),  # a tail, then a jump: gross beyond the tail
+        (np.geomspace(3.5, 900.0, 25), noise.OFF_BY),  # no jump of GAP: the tail runs on
+        (np.array([12.0, 15.0]), noise.OFF_BY),  # two near false loops, not a tail
+        (np.geomspace(3.5, 150.0, 25), noise.OFF_BY),  # the jump starts beyond TAIL_MAX
+        (np.geomspace(40.0, 60.0, 25), noise.OFF_BY),  # a cluster a jump away from the bulk
+        (np.array([]), noise.OFF_BY),  # nothing beyond OFF_BY
+    ],
+)
+def test_the_tail_ends_at_a_jump_after_enough_measurements_below_tail_max(beyond, gross_from):
+    bulk = np.linspace(0.01, 3.0, 500)
+    ratios = np.concatenate([bulk, beyond, np.geomspace(3000.0, 1e5, 50)])
+    assert noise.tail_end(np.random.default_rng(1).permutation(ratios)) == pytest.approx(gross_from)
+
+
+def test_robust_mode_keeps_parking_garages_heavy_tailed_true_loops(shared_dataset):
+    """parking-garage states about 20,000× its noise, and its true loops' tests run on to
+    about 45× their limit under the noise the residuals show. With 10% false loops
+    (``add_false_loops``, seed 0), robust mode calibrates, rejects every false loop and keeps
+    every true one: its solution's error over the true measurements is the outlier-free
+    optimum's within 1e-6 (it had been 2.85% above with the heavy tail counted as gross)."""
+    graph = posegraph.read_graph(str(shared_dataset("parking-garage.g2o"))).graph
+    optimum = posegraph.optimize(graph.copy())
+    corrupted, false = add_false_loops(graph, 0.1, seed=0)
+    result = posegraph.optimize(corrupted.copy(), robust="gnc")
+    rejected_false, rejected_true = rejection_rates(
+        corrupted, false, np.array(result.summary.rejected_edges)
+    )
+    assert rejected_false == 1.0 and rejected_true == 0.0
+    assert result.summary.calibration["automatic"] is True
+    error = 0.5 * chi2(result.values, graph.edges, graph.priors)
+    assert error == pytest.approx(optimum.summary.final_error, rel=1e-6)
