@@ -221,10 +221,10 @@ def _loop_tests(ratios: np.ndarray) -> noise.MeasurementTests:
 
 def test_a_heavy_tail_of_true_loops_parted_from_the_false_ones_widens_the_tail_scale():
     """parking-garage's pattern: the true loops' tests run on from the bulk past ``OFF_BY``
-    times the limit to about 45×, the false ones start at 1,300×. After a robust solve that rejected both,
-    the heavy tail is not gross: the tail scale lets all but 0.1% of the true loops pass, and
-    every false loop still fails by more than ``OFF_BY``. Where the true loops' tests run on
-    into the false ones', the heavy ones stay gross and fail."""
+    times the limit to about 45×, the false ones start at 1,300×. After a robust solve that
+    rejected both, the heavy tail is not gross: the tail scale lets all but 0.1% of the true
+    loops pass, and every false loop still fails by more than ``OFF_BY``. Where the true
+    loops' tests run on into the false ones', the heavy ones stay gross and fail."""
     rng = np.random.default_rng(0)
     limit = default_width(3, 0.999) ** 2
     bulk = rng.chisquare(3, size=2000) / limit
@@ -270,7 +270,7 @@ def test_robust_mode_keeps_parking_garages_heavy_tailed_true_loops(shared_datase
     about 45× their limit under the noise the residuals show. With 10% false loops
     (``add_false_loops``, seed 0), robust mode calibrates, rejects every false loop and keeps
     every true one: its solution's error over the true measurements is the outlier-free
-    optimum's within 1e-6 (it had been 2.85% above with the heavy tail counted as gross)."""
+    optimum's within 1e-6."""
     graph = posegraph.read_graph(str(shared_dataset("parking-garage.g2o"))).graph
     optimum = posegraph.optimize(graph.copy())
     corrupted, false = add_false_loops(graph, 0.1, seed=0)
