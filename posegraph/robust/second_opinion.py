@@ -19,7 +19,11 @@ residuals' variance). Its median loop closure fits better than dead reckoning, a
 file's information its TLS objective is lower than that of the true map, which pays c² for
 each false loop; but the true map fits the median loop closure far better. There the narrower
 run's solution replaces the first where its median loop closure's s is more than ``OFF_BY``
-times lower (on files without outliers, it is at most a few per cent lower, or higher).
+times lower (on files without outliers, it is at most a few per cent lower, or higher). The
+median is read after the narrower run's graduated stages, before its local search, which runs
+only where the run is taken: a search refines a few decisions and does not move the median
+loop tenfold, and on files without outliers, which every robust run there asks, it would be
+most of the run's time.
 
 Where GNC's first width was too narrow instead (it rejected true loops that the noise of what
 it kept explains, ``calibration``), the decisions that calibration settles from that run at the
@@ -64,7 +68,8 @@ class FromStart:
     """GNC runs anew from the ``start`` of a robust call at the default width, which
     calibration asks for: ``solve(search=...)`` runs GNC from the graph's values, which these
     set to ``start``, at the graph's information as it then is, with its local search or
-    without."""
+    without; ``solve(run)`` settles the decisions of an earlier ``run`` from the graph's values
+    and searches from them."""
 
     graph: PoseGraph
     kernel: Kernel
@@ -75,9 +80,10 @@ class FromStart:
         """The narrower run's result and its precision factor where ``first``, a GNC run from
         ``start`` at the graph's information, fits the median measurement worse than
         ``start`` and the narrower run ends with a lower TLS objective at the graph's
-        information, or where ``first`` rejected nothing and the narrower run fits the median
-        measurement ``OFF_BY`` times better; the graph's information is then left multiplied
-        by the factor. Else None, the graph as it was."""
+        information, or where ``first`` rejected nothing and the narrower run's stages fit the
+        median measurement ``OFF_BY`` times better (their decisions are then settled and
+        searched from); the graph's information is then left multiplied by the factor. Else
+        None, the graph as it was."""
         graph = self.graph
         measured = self.kernel.measured[: graph.num_edges]
         worse = fits_median_worse(graph, measured, self.start, first.values)
@@ -88,7 +94,7 @@ class FromStart:
         information = graph.edges, graph.priors
         scale_information(graph, dict.fromkeys(KINDS, NARROWER))
         narrower = graph.edges, graph.priors
-        result = self._run(stage="narrower")
+        result = self._run(search=worse, stage="narrower")
         graph.edges, graph.priors = information
         if worse:
             better = self._objective(result.values) < self._objective(first.values)
@@ -97,6 +103,9 @@ class FromStart:
         if not better:
             return None
         graph.edges, graph.priors = narrower
+        if not worse:  # its decisions settled and searched from, as in GNC's own run
+            graph.set_values(result.values, check=False)
+            result = self.solve(result, stage="narrower")
         return result, NARROWER
 
     def anew(self, settled: Result, search: bool = True) -> Result | None:

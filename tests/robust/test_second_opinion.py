@@ -37,13 +37,14 @@ def _turned(result, radians: float):
     return dataclasses.replace(result, values=values)
 
 
-def _runs(graph, kernel, start, values, seen):
-    """GNC's runs from ``start`` on ``graph``, scripted to end at ``values``; each records the
-    information and the values it starts from."""
+def _runs(graph, kernel, start, values, seen, searched=None):
+    """GNC's runs from ``start`` on ``graph``, scripted to end at ``values``, and a search from
+    an earlier run's decisions, at ``searched``; each records the information and the values
+    it starts from, whether it searches, and the run whose decisions it searches from."""
 
-    def solve(search: bool = True, stage: str = "calibrated"):
-        seen.append((graph.edges.information, graph.values, search))
-        return values
+    def solve(after=None, search: bool = True, stage: str = "calibrated"):
+        seen.append((graph.edges.information, graph.values, search, after))
+        return values if after is None else searched
 
     return second_opinion.FromStart(graph, kernel, start, solve)
 
@@ -62,11 +63,11 @@ def test_the_narrower_run_replaces_a_worse_solution_and_keeps_its_precision(prob
     taken = _runs(work, kernel, start, solved, seen).second_opinion(bent)
     assert taken is not None and taken[0] is solved
     assert taken[1] == second_opinion.NARROWER
-    ((information, values, searched),) = seen
+    ((information, values, searched, after),) = seen
     narrower = second_opinion.NARROWER * graph.edges.information  # every precision
     assert np.allclose(information, narrower, rtol=1e-12, atol=0)
     assert np.allclose(values.as_matrix(), start.as_matrix())  # GNC anew from the start
-    assert searched  # with its local search
+    assert searched and after is None  # with its local search, before the objectives compare
     assert np.allclose(work.edges.information, narrower, rtol=1e-12, atol=0)
 
 
@@ -100,19 +101,30 @@ def test_a_solution_that_fits_the_median_loop_better_and_rejected_some_is_not_se
 @pytest.mark.parametrize(("turn", "taken"), [(5e-4, True), (1e-4, False)])
 def test_a_solution_that_kept_every_loop_is_judged_by_the_median_loop(problem, turn, taken):
     """A run that rejected nothing, fitting the median loop better than its start: the
-    narrower run (here ending at the least-squares solution) replaces it where its median loop
-    closure's s is more than ``OFF_BY`` times lower (a map crumpled to fit false loops within
-    a width far wider than the noise), whatever the TLS objectives at the file's information."""
+    narrower run's stages (here ending at the least-squares solution) replace it where their
+    median loop closure's s is more than ``OFF_BY`` times lower (a map crumpled to fit false
+    loops within a width far wider than the noise), whatever the TLS objectives at the file's
+    information; only then are their decisions settled and searched from."""
     graph, kernel, start, solved, _ = problem
     first = _turned(solved, turn)  # median s of the loops: 19x and 1.8x the solution's
     measured = kernel.measured[: graph.num_edges]
     assert not second_opinion.fits_median_worse(graph, measured, start, first.values)
     work, seen = graph.copy(), []
     edges = work.edges
-    opinion = _runs(work, kernel, start, solved, seen).second_opinion(first)
-    assert len(seen) == 1  # asked
+    searched = dataclasses.replace(solved)
+    opinion = _runs(work, kernel, start, solved, seen, searched).second_opinion(first)
     assert (opinion is not None) is taken
     assert (work.edges is edges) is not taken  # the narrower information kept where taken
+    narrower = second_opinion.NARROWER * graph.edges.information
+    information, values, search, after = seen[0]  # asked, its stages alone
+    assert np.allclose(information, narrower, rtol=1e-12, atol=0)
+    assert np.allclose(values.as_matrix(), start.as_matrix()) and not search and after is None
+    assert len(seen) == (2 if taken else 1)  # searched only where taken
+    if taken:
+        information, values, search, after = seen[1]
+        assert after is solved and opinion[0] is searched  # from the stages' decisions
+        assert np.allclose(information, narrower, rtol=1e-12, atol=0)
+        assert np.allclose(values.as_matrix(), solved.values.as_matrix())
 
 
 def test_calibration_goes_on_from_a_second_opinion_taken(problem, monkeypatch):
@@ -149,7 +161,7 @@ def test_gnc_anew_replaces_a_settled_solution_only_where_its_objective_is_lower(
     graph, kernel, start, solved, bent = problem
     work, seen = graph.copy(), []
     assert _runs(work, kernel, start, solved, seen).anew(bent) is solved
-    ((information, values, searched),) = seen
+    ((information, values, searched, _),) = seen
     assert np.array_equal(information, graph.edges.information)  # at the graph's information
     assert np.allclose(values.as_matrix(), start.as_matrix())  # from the start
     assert searched  # with its local search unless asked
