@@ -183,16 +183,21 @@ def beyond_tail(ratios: np.ndarray, among: np.ndarray) -> np.ndarray:
 
 def tail_end(ratios: np.ndarray) -> float:
     """The ratio of test to limit beyond which a measurement is gross: ``OFF_BY``, or the start
-    of a jump of ``GAP`` where at least ``TAIL_MEMBERS`` ratios run on from ``OFF_BY`` to it in
-    smaller steps and it starts below ``TAIL_MAX``: a tail of true measurements whose noise is
+    of a jump of ``GAP`` where at least ``TAIL_MEMBERS`` ratios run on from ``OFF_BY`` to it
+    in smaller steps and it is at most ``TAIL_MAX``: a tail of true measurements whose noise is
     heavier than a Gaussian's, apart from the gross outliers (parking-garage's true loops;
-    ``docs/architecture.md``)."""
+    ``docs/architecture.md``). The largest ratio ends such a tail where no jump follows and
+    the tail holds at most ``FALSE_SHARE`` of the ratios: more, running on smoothly, are false
+    measurements that a narrow width pulled apart (w10000's, at 10% false loops)."""
     ascending = np.sort(ratios[np.isfinite(ratios)])
-    above = ascending[max(np.searchsorted(ascending, OFF_BY, side="right") - 1, 0) :]
+    start = max(np.searchsorted(ascending, OFF_BY, side="right") - 1, 0)
+    above = np.append(ascending[start:], np.inf)  # the end of the ratios as a jump
     jumps = np.flatnonzero(above[1:] >= GAP * above[:-1])
     if not jumps.size or not OFF_BY < above[jumps[0]] <= TAIL_MAX:
         return OFF_BY
-    if np.count_nonzero(above[: jumps[0] + 1] > OFF_BY) < TAIL_MEMBERS:
+    members = np.count_nonzero(above[: jumps[0] + 1] > OFF_BY)
+    last = jumps[0] == above.size - 2
+    if members < TAIL_MEMBERS or (last and members > FALSE_SHARE * ascending.size):
         return OFF_BY
     return float(above[jumps[0]])
 

@@ -259,10 +259,25 @@ def test_a_heavy_tail_of_true_loops_parted_from_the_false_ones_widens_the_tail_s
         (np.array([]), noise.OFF_BY),  # nothing beyond OFF_BY
     ],
 )
-def test_the_tail_ends_at_a_jump_after_enough_measurements_below_tail_max(beyond, gross_from):
-    bulk = np.linspace(0.01, 3.0, 500)
-    ratios = np.concatenate([bulk, beyond, np.geomspace(3000.0, 1e5, 50)])
+@pytest.mark.parametrize("false", [np.geomspace(3000.0, 1e5, 50), np.array([])])
+def test_the_tail_ends_at_a_jump_after_enough_measurements_below_tail_max(
+    beyond, gross_from, false
+):
+    """With false measurements far beyond, or none (a tail that ends where the tests do)."""
+    bulk = np.linspace(0.01, 3.0, 5000)
+    ratios = np.concatenate([bulk, beyond, false])
     assert noise.tail_end(np.random.default_rng(1).permutation(ratios)) == pytest.approx(gross_from)
+
+
+@pytest.mark.parametrize(
+    ("false", "gross_from"), [(np.geomspace(3000.0, 1e5, 50), 45.0), ([], 10.0)]
+)
+def test_a_tail_of_more_than_false_share_ends_only_at_a_jump(false, gross_from):
+    """A smooth tail past ``OFF_BY`` holding 4% of the tests: true where a jump parts it from
+    false measurements beyond; where it runs on to the last test, gross (w10000's false loops
+    under a narrow width run on so, to 83× their limit)."""
+    ratios = np.concatenate([np.linspace(0.01, 3.0, 5000), np.geomspace(3.5, 45.0, 400), false])
+    assert noise.tail_end(ratios) == pytest.approx(gross_from)
 
 
 def test_robust_mode_keeps_parking_garages_heavy_tailed_true_loops(shared_dataset):
@@ -280,5 +295,17 @@ def test_robust_mode_keeps_parking_garages_heavy_tailed_true_loops(shared_datase
     )
     assert rejected_false == 1.0 and rejected_true == 0.0
     assert result.summary.calibration["automatic"] is True
+    error = 0.5 * chi2(result.values, graph.edges, graph.priors)
+    assert error == pytest.approx(optimum.summary.final_error, rel=1e-6)
+
+
+def test_robust_mode_keeps_parking_garages_true_loops_without_false_ones(shared_dataset):
+    """On parking-garage as it is, whose true loops' tests run on to about 40× their limit
+    and end there, robust mode rejects nothing, has nothing to calibrate, and ends at the
+    least-squares optimum."""
+    graph = posegraph.read_graph(str(shared_dataset("parking-garage.g2o"))).graph
+    optimum = posegraph.optimize(graph.copy())
+    result = posegraph.optimize(graph.copy(), robust="gnc")
+    assert result.summary.rejected_edges == [] and result.summary.calibration is None
     error = 0.5 * chi2(result.values, graph.edges, graph.priors)
     assert error == pytest.approx(optimum.summary.final_error, rel=1e-6)
