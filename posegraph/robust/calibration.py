@@ -11,7 +11,7 @@ deleted residuals of the inliers, and the innovations of what a robust solve lef
   Baarda's test on several per cent of the true measurements;
 - the tail scale, the largest at which no more of all the measurements fail the test than it
   lets through, leaving out the gross outliers: beyond ``OFF_BY`` times its limit under the
-  median scale, or beyond a heavy tail of true ones that runs on to a jump (``noise.beyond_tail``).
+  median scale, or beyond the end of a heavy tail of true ones (``noise.tail_end``).
 A class gets the smaller; in a robust solve that kept gross outliers, the median scale, so that
 the next solve rejects them (and the tail scale then re-admits the true measurements of the
 heavy tail that it rejected too). Where that wider width brings gross outliers back,
